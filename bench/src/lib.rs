@@ -1,0 +1,18 @@
+//! # fusepose-bench — benchmarks that print measured numbers
+//!
+//! Every benchmark prints medians and tail percentiles with units and the
+//! machine load before and after; none asserts on timings.
+//!
+//! - [`estimator`]: per-stage latency of sampling, the fusion network (pose
+//!   net, refiner) and the ICP baseline on rendered frames, GEMM peak and
+//!   achieved GFLOP/s, allocations per steady-state frame, a PNG plot.
+//! - [`alloc_count`]: the counting global allocator the binary installs.
+//! - [`cpu_time`]: the calling thread's CPU time, beside wall time.
+//! - [`summary`]: median / p90 / p99 of a sample.
+//! - [`loadavg`]: `/proc/loadavg`, printed around every run.
+
+pub mod alloc_count;
+pub mod cpu_time;
+pub mod estimator;
+pub mod loadavg;
+pub mod summary;

@@ -1,0 +1,407 @@
+//! `fusepose eval`: run an estimator frame by frame over a BOP or YCB-Video
+//! dataset and score it (ADD-S AUC, ADD(S) AUC, ADD-S < 2 cm, per object and
+//! overall), with timing, a BOP results CSV, a JSON summary and a PNG of the
+//! accuracy–threshold curves.
+//!
+//! Scoring: every ground-truth object of the evaluated set counts once; an
+//! object with no estimate of its class (instance not found, dropped, or the
+//! frame refused) is a failure (infinite error). With several instances of a
+//! class in a frame, estimates are matched greedily by translation distance.
+//! Timing covers `Workspace::prepare` + `Estimator::estimate` per frame (not
+//! image decoding); time per object is the frame time divided by the
+//! instances estimated in it.
+
+mod dataset;
+
+use std::collections::BTreeMap;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{Context, bail};
+use fusepose_estimator::net::{NetEstimator, NetOptions};
+use fusepose_estimator::{
+    ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
+    Workspace, WorkspaceConfig,
+};
+use fusepose_scene::metrics::{BopResult, BopResultsWriter, MetricsRow, MetricsTable, ObjectMetric, plot_accuracy_curves};
+use fusepose_scene::{ObjectSet, Pose};
+use indicatif::{ProgressBar, ProgressStyle};
+
+use dataset::{EvalDataset, EvalFrame, GtObject};
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum EstimatorKind {
+    Icp,
+    Net,
+}
+
+impl EstimatorKind {
+    fn name(self) -> &'static str {
+        match self {
+            EstimatorKind::Icp => "icp",
+            EstimatorKind::Net => "net",
+        }
+    }
+}
+
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum MaskSource {
+    /// Ground-truth visible masks from the dataset.
+    Gt,
+    /// The segmentation network's masks.
+    Net,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Dataset: a BOP root or split folder, or a YCB-Video root.
+    #[arg(long)]
+    pub dataset: PathBuf,
+    /// BOP split under the dataset root.
+    #[arg(long, default_value = "test")]
+    pub split: String,
+    /// Estimator to evaluate.
+    #[arg(long, value_enum, default_value_t = EstimatorKind::Icp)]
+    pub estimator: EstimatorKind,
+    /// Evaluate several estimators on the same frames (e.g. `icp,net`); overrides --estimator.
+    #[arg(long, value_enum, value_delimiter = ',')]
+    pub compare: Vec<EstimatorKind>,
+    /// Where instance masks come from.
+    #[arg(long, value_enum, default_value_t = MaskSource::Gt)]
+    pub masks: MaskSource,
+    /// Object set: `builtin` or a mesh folder (default: the one the dataset names, else builtin).
+    #[arg(long)]
+    pub objects: Option<String>,
+    /// Metres per mesh-file unit for a mesh folder.
+    #[arg(long, default_value_t = 1.0)]
+    pub mesh_scale: f64,
+    /// Network weights (safetensors) for `--estimator net`.
+    #[arg(long)]
+    pub weights: Option<PathBuf>,
+    /// Evaluate only the first N frames.
+    #[arg(long)]
+    pub limit: Option<usize>,
+    /// Most instances estimated per frame (largest masks first).
+    #[arg(long, default_value_t = 16)]
+    pub max_instances: usize,
+    /// Write the summary as JSON.
+    #[arg(long)]
+    pub json: Option<PathBuf>,
+    /// Write BOP results CSV (with --compare: one file per estimator, `<stem>_<name>.csv`).
+    #[arg(long)]
+    pub csv: Option<PathBuf>,
+    /// Write a PNG of the ADD-S accuracy–threshold curves.
+    #[arg(long)]
+    pub plot: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.masks == MaskSource::Net {
+        bail!("--masks net: the segmentation network is not available in this build yet; use --masks gt");
+    }
+    let mut data = EvalDataset::open(&args.dataset, &args.split)?;
+    let source = args.objects.clone().or_else(|| data.object_source()).unwrap_or_else(|| "builtin".into());
+    let objects = fusepose_scene::mesh_io::load_object_set(&source, args.mesh_scale)
+        .with_context(|| format!("loading object set `{source}`"))?;
+    data.bind(&objects)?;
+    let kinds = if args.compare.is_empty() { vec![args.estimator] } else { args.compare.clone() };
+    let mut runners = kinds
+        .iter()
+        .map(|&k| Runner::new(k, &objects, &args))
+        .collect::<anyhow::Result<Vec<_>>>()?;
+    let metrics = objects
+        .objects
+        .iter()
+        .map(ObjectMetric::for_model)
+        .collect::<Result<Vec<_>, _>>()
+        .context("preparing ADD/ADD-S points")?;
+
+    let frames = args.limit.map_or(data.len(), |l| l.min(data.len()));
+    let bar = ProgressBar::new(frames as u64);
+    bar.set_style(
+        ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} frames {elapsed_precise} eta {eta}")
+            .unwrap_or_else(|_| ProgressStyle::default_bar())
+            .progress_chars("=> "),
+    );
+    bar.set_prefix(kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join(","));
+    for index in 0..frames {
+        let frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
+        for runner in &mut runners {
+            runner.evaluate(&frame, index as u64, &metrics)?;
+        }
+        bar.inc(1);
+    }
+    bar.finish_and_clear();
+
+    let name = args.dataset.display().to_string();
+    let mut summaries = serde_json::Map::new();
+    for runner in &mut runners {
+        runner.print(&name, frames);
+        summaries.insert(runner.kind.name().to_string(), runner.summary());
+        if let Some(csv) = runner.csv.take() {
+            csv.finish().context("writing BOP results CSV")?;
+        }
+    }
+    if let Some(path) = &args.json {
+        let json = if summaries.len() == 1 {
+            summaries.into_iter().next().map(|(_, v)| v).unwrap_or_default()
+        } else {
+            serde_json::Value::Object(summaries)
+        };
+        std::fs::write(path, serde_json::to_string_pretty(&json)?).with_context(|| format!("writing {}", path.display()))?;
+        println!("wrote {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        write_plot(&runners, path)?;
+        println!("wrote {}", path.display());
+    }
+    Ok(())
+}
+
+/// One estimator under evaluation with its buffers and accumulated results.
+struct Runner {
+    kind: EstimatorKind,
+    estimator: Box<dyn Estimator>,
+    workspace: Workspace,
+    poses: PoseSet,
+    table: MetricsTable,
+    frame_ms: Vec<f64>,
+    object_ms: Vec<f64>,
+    /// Frames refused by validation, by reason.
+    refused: BTreeMap<&'static str, usize>,
+    csv: Option<BopResultsWriter>,
+}
+
+impl Runner {
+    fn new(kind: EstimatorKind, objects: &ObjectSet, args: &Args) -> anyhow::Result<Self> {
+        let num_classes = u16::try_from(objects.len()).context("more than 65535 objects")?;
+        let (estimator, config): (Box<dyn Estimator>, WorkspaceConfig) = match kind {
+            EstimatorKind::Icp => (
+                Box::new(IcpEstimator::new(objects, IcpConfig::default())?),
+                WorkspaceConfig { max_instances: args.max_instances, ..WorkspaceConfig::default() },
+            ),
+            EstimatorKind::Net => {
+                let Some(weights) = &args.weights else {
+                    bail!("--estimator net needs --weights FILE (a safetensors file from `fusepose train`)");
+                };
+                let net = NetEstimator::load(weights, objects, NetOptions::default())
+                    .with_context(|| format!("loading {}", weights.display()))?;
+                let config = net.workspace_config(args.max_instances);
+                (Box::new(net), config)
+            }
+        };
+        let workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
+        let csv = match &args.csv {
+            None => None,
+            Some(path) => {
+                let path = if args.compare.len() > 1 { suffixed(path, kind.name()) } else { path.clone() };
+                Some(BopResultsWriter::create(&path).with_context(|| format!("creating {}", path.display()))?)
+            }
+        };
+        Ok(Self {
+            kind,
+            estimator,
+            poses: PoseSet::with_capacity(config.max_instances),
+            workspace,
+            table: MetricsTable::for_objects(objects),
+            frame_ms: Vec::new(),
+            object_ms: Vec::new(),
+            refused: BTreeMap::new(),
+            csv,
+        })
+    }
+
+    fn evaluate(&mut self, frame: &EvalFrame, seed: u64, metrics: &[ObjectMetric]) -> anyhow::Result<()> {
+        let view = FrameView {
+            intrinsics: frame.intrinsics,
+            color_format: ColorFormat::Rgb8,
+            color: &frame.rgb,
+            depth: DepthPlane::U16 { data: &frame.depth, scale: frame.depth_unit_m as f32 },
+            labels: Some(LabelPlane::U16(&frame.labels)),
+        };
+        let start = Instant::now();
+        let prepared = self.workspace.prepare(&view, seed);
+        let estimated = match prepared {
+            Ok(_) => self.estimator.estimate(&view, &mut self.workspace, &mut self.poses).map(|_| ()),
+            Err(e) => Err(e.into()),
+        };
+        let seconds = start.elapsed().as_secs_f64();
+        if let Err(e) = estimated {
+            let reason = match &e {
+                fusepose_estimator::EstimateError::Frame(f) => f.reason(),
+                _ => "estimate_error",
+            };
+            *self.refused.entry(reason).or_default() += 1;
+            tracing::warn!("frame {}/{}: {e}", frame.scene_id, frame.im_id);
+            self.poses.clear();
+        }
+        self.frame_ms.push(seconds * 1e3);
+        if !self.poses.is_empty() {
+            let per_object = seconds * 1e3 / self.poses.len() as f64;
+            self.object_ms.extend(std::iter::repeat_n(per_object, self.poses.len()));
+        }
+        for (gt, est) in match_estimates(&frame.gt, self.poses.as_slice()) {
+            let errors = est.zip(metrics.get(gt.class_id as usize - 1)).map(|(e, m)| m.errors(&pose_of(e), &gt.pose));
+            self.table.record(gt.class_id, errors);
+        }
+        if let Some(csv) = &mut self.csv {
+            for p in self.poses.as_slice() {
+                csv.write(&BopResult {
+                    scene_id: frame.scene_id,
+                    im_id: frame.im_id,
+                    obj_id: p.class_id,
+                    score: p.confidence as f64,
+                    pose: pose_of(p),
+                    time_s: seconds,
+                })?;
+            }
+        }
+        Ok(())
+    }
+
+    fn print(&self, dataset: &str, frames: usize) {
+        println!("\n{} on {dataset}: {frames} frames, {} ground-truth objects", self.kind.name(), self.table.overall().count);
+        print!("{}", self.table);
+        let (fm, fp) = (percentile(&self.frame_ms, 0.5), percentile(&self.frame_ms, 0.99));
+        let (om, op) = (percentile(&self.object_ms, 0.5), percentile(&self.object_ms, 0.99));
+        println!("time per frame: median {fm:.2} ms, p99 {fp:.2} ms; per object: median {om:.2} ms, p99 {op:.2} ms");
+        if !self.refused.is_empty() {
+            println!("frames refused: {:?}", self.refused);
+        }
+    }
+
+    /// `{"overall": {...}, "per_object": {name: {...}}}`.
+    fn summary(&self) -> serde_json::Value {
+        let row = |r: &MetricsRow| {
+            serde_json::json!({
+                "add_s_auc": r.add_s_auc,
+                "add_s_auc_symmetric_aware": r.add_s_auc_symmetric_aware,
+                "add_s_lt_2cm": r.add_s_lt_2cm,
+                "count": r.count,
+            })
+        };
+        let mut overall = row(&self.table.overall());
+        if let Some(o) = overall.as_object_mut() {
+            o.insert("ms_per_frame_median".into(), percentile(&self.frame_ms, 0.5).into());
+            o.insert("ms_per_frame_p99".into(), percentile(&self.frame_ms, 0.99).into());
+            o.insert("ms_per_object_median".into(), percentile(&self.object_ms, 0.5).into());
+            o.insert("ms_per_object_p99".into(), percentile(&self.object_ms, 0.99).into());
+            o.insert("frames".into(), self.frame_ms.len().into());
+            o.insert("frames_refused".into(), self.refused.values().sum::<usize>().into());
+        }
+        let per_object: serde_json::Map<String, serde_json::Value> =
+            self.table.rows().iter().map(|r| (r.name.clone(), row(r))).collect();
+        serde_json::json!({ "estimator": self.kind.name(), "overall": overall, "per_object": per_object })
+    }
+}
+
+/// Pairs each ground-truth object with an estimate of its class (greedy, by
+/// translation distance; each estimate used once), or `None`.
+fn match_estimates<'a>(gt: &'a [GtObject], poses: &'a [ObjectPose]) -> Vec<(&'a GtObject, Option<&'a ObjectPose>)> {
+    let mut used = vec![false; poses.len()];
+    gt.iter()
+        .map(|g| {
+            let best = poses
+                .iter()
+                .enumerate()
+                .filter(|(i, p)| !used[*i] && p.class_id == g.class_id)
+                .min_by(|(_, a), (_, b)| {
+                    let da = (a.translation - g.pose.translation.vector).norm();
+                    let db = (b.translation - g.pose.translation.vector).norm();
+                    da.total_cmp(&db)
+                })
+                .map(|(i, _)| i);
+            if let Some(i) = best {
+                used[i] = true;
+            }
+            (g, best.map(|i| &poses[i]))
+        })
+        .collect()
+}
+
+fn pose_of(p: &ObjectPose) -> Pose {
+    Pose::from_parts(p.translation.into(), p.rotation)
+}
+
+/// The `q`-quantile (nearest rank) of `values`; NaN when empty.
+fn percentile(values: &[f64], q: f64) -> f64 {
+    if values.is_empty() {
+        return f64::NAN;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let rank = ((q * v.len() as f64).ceil() as usize).clamp(1, v.len());
+    v[rank - 1]
+}
+
+/// `dir/stem_suffix.ext` for `dir/stem.ext`.
+fn suffixed(path: &Path, suffix: &str) -> PathBuf {
+    let stem = path.file_stem().map(|s| s.to_string_lossy().into_owned()).unwrap_or_default();
+    let ext = path.extension().map(|e| format!(".{}", e.to_string_lossy())).unwrap_or_default();
+    path.with_file_name(format!("{stem}_{suffix}{ext}"))
+}
+
+/// One estimator: a curve per object plus `ALL`; several: `ALL` per estimator.
+fn write_plot(runners: &[Runner], path: &Path) -> anyhow::Result<()> {
+    let mut curves: Vec<(String, Vec<f64>)> = Vec::new();
+    for r in runners {
+        let all: Vec<f64> = r.table.add_s_curves().into_iter().flat_map(|(_, e)| e).collect();
+        if runners.len() == 1 {
+            curves.extend(r.table.add_s_curves().into_iter().filter(|(_, e)| !e.is_empty()));
+            curves.push(("ALL".to_string(), all));
+        } else {
+            curves.push((format!("{} ALL", r.kind.name()), all));
+        }
+    }
+    let borrowed: Vec<(&str, Vec<f64>)> = curves.iter().map(|(n, e)| (n.as_str(), e.clone())).collect();
+    plot_accuracy_curves(&borrowed, path).with_context(|| format!("writing {}", path.display()))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// An estimate of `class_id` at x metres (pose built from scene's `Pose`,
+    /// the CLI does not depend on nalgebra).
+    fn at(class_id: u16, x: f64) -> ObjectPose {
+        let p = Pose::translation(x, 0.0, 0.5);
+        ObjectPose {
+            class_id,
+            instance_id: 0,
+            rotation: p.rotation,
+            translation: p.translation.vector,
+            confidence: 1.0,
+            mask_pixels: 100,
+            bbox: [0; 4],
+            iterations: 1,
+        }
+    }
+
+    #[test]
+    fn matching_pairs_by_class_and_distance_and_reports_misses() {
+        let gt = vec![
+            GtObject { class_id: 1, pose: Pose::translation(0.1, 0.0, 0.5) },
+            GtObject { class_id: 1, pose: Pose::translation(-0.1, 0.0, 0.5) },
+            GtObject { class_id: 2, pose: Pose::translation(0.0, 0.0, 0.5) },
+        ];
+        let poses = vec![at(1, -0.09), at(1, 0.11)];
+        let m = match_estimates(&gt, &poses);
+        assert_eq!(m[0].1.map(|p| p.translation.x), Some(0.11));
+        assert_eq!(m[1].1.map(|p| p.translation.x), Some(-0.09));
+        assert!(m[2].1.is_none(), "class 2 has no estimate: a miss");
+    }
+
+    #[test]
+    fn percentiles_use_nearest_rank() {
+        let v: Vec<f64> = (1..=100).map(f64::from).collect();
+        assert_eq!(percentile(&v, 0.5), 50.0);
+        assert_eq!(percentile(&v, 0.99), 99.0);
+        assert!(percentile(&[], 0.5).is_nan());
+    }
+
+    #[test]
+    fn compare_csv_names_get_the_estimator_suffix() {
+        assert_eq!(suffixed(Path::new("out/res.csv"), "icp"), PathBuf::from("out/res_icp.csv"));
+    }
+}

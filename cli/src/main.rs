@@ -1,0 +1,68 @@
+//! # fusepose — the user command line
+//!
+//! Thin over the libraries: every subcommand parses flags and calls into
+//! scene, estimator, train or client. No logic of its own beyond wiring.
+
+mod camera;
+mod demo;
+mod eval;
+mod objects;
+mod render;
+mod stats;
+mod train;
+mod watch;
+
+use clap::{Parser, Subcommand};
+
+/// fusepose: real-time 6D object pose from RGB-D frames.
+#[derive(Parser)]
+#[command(name = "fusepose", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Act as a camera: replay a dataset or render frames, publish them to fuseposed.
+    Camera(camera::Args),
+    /// Print poses published by fuseposed as they arrive.
+    Watch(watch::Args),
+    /// Query fuseposed for its latency histograms and counters.
+    Stats(stats::Args),
+    /// Render a synthetic BOP dataset of tabletop scenes.
+    Render(render::Args),
+    /// Inspect or export object sets.
+    Objects(objects::Args),
+    /// Train the fusion network (and refiner, segmenter).
+    Train(train::Args),
+    /// Evaluate an estimator on a BOP or YCB-Video dataset.
+    Eval(eval::Args),
+    /// Run daemon, synthetic camera and consumer together and show live results.
+    Demo(demo::Args),
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("FUSEPOSE_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+        )
+        .with_writer(std::io::stderr)
+        .init();
+    let cli = Cli::parse();
+    let result = match cli.command {
+        Command::Camera(a) => camera::run(a),
+        Command::Watch(a) => watch::run(a),
+        Command::Stats(a) => stats::run(a),
+        Command::Render(a) => render::run(a),
+        Command::Objects(a) => objects::run(a),
+        Command::Train(a) => train::run(a),
+        Command::Eval(a) => eval::run(a),
+        Command::Demo(a) => demo::run(a),
+    };
+    if let Err(e) = result {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

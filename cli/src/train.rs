@@ -1,0 +1,180 @@
+//! `fusepose train`: trains the fusion network (pose net + integrated refiner)
+//! on scenes rendered on the fly and writes a safetensors weight file that
+//! `fuseposed` loads. See docs/TRAINING.md.
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use anyhow::Context;
+use fusepose_scene::mesh_io::load_object_set;
+use fusepose_train::data::Source;
+use fusepose_train::trainer::{Stage, TrainOptions, train, validate_file};
+
+#[derive(Clone, Copy, Debug, clap::ValueEnum)]
+pub enum StageArg {
+    Pose,
+    Refine,
+    Both,
+}
+
+#[derive(clap::Args, Debug)]
+pub struct Args {
+    /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
+    #[arg(long, default_value = "builtin")]
+    pub objects: String,
+    /// Metres per mesh-file unit (not applied to `builtin`).
+    #[arg(long, default_value_t = 1.0)]
+    pub scale: f64,
+    /// Train on a BOP dataset split folder (e.g. `data/out/train`; obj_ids = class ids)
+    /// instead of rendering: frames with index % 10 != 0 train, the others validate.
+    #[arg(long)]
+    pub dataset: Option<PathBuf>,
+    /// Output weight file.
+    #[arg(long, default_value = "models/builtin.safetensors")]
+    pub out: PathBuf,
+    /// Training wall-time budget in minutes.
+    #[arg(long)]
+    pub minutes: Option<f64>,
+    /// Stop at this total step count (resumed steps included).
+    #[arg(long)]
+    pub steps: Option<u64>,
+    /// Continue from a checkpoint or a shipped weight file.
+    #[arg(long)]
+    pub resume: Option<PathBuf>,
+    #[arg(long, value_enum, default_value = "both")]
+    pub stage: StageArg,
+    #[arg(long, default_value_t = 8)]
+    pub batch: usize,
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Peak Adam learning rate (cosine decay to a tenth over the budget).
+    #[arg(long, default_value_t = 1e-3)]
+    pub lr: f64,
+    /// Folder for `checkpoint.safetensors`.
+    #[arg(long, default_value = "scratch")]
+    pub checkpoint_dir: PathBuf,
+    /// Minutes between checkpoints.
+    #[arg(long, default_value_t = 5.0)]
+    pub checkpoint_minutes: f64,
+    /// Append a plain-text log here.
+    #[arg(long)]
+    pub log: Option<PathBuf>,
+    /// Validation scenes (held-out seeds) and the most instances scored.
+    #[arg(long, default_value_t = 120)]
+    pub val_frames: usize,
+    #[arg(long, default_value_t = 400)]
+    pub val_samples: usize,
+    /// Only validate the weight file given with --resume; no training.
+    #[arg(long)]
+    pub validate_only: bool,
+    /// Points per instance and crop side for a fresh run.
+    #[arg(long)]
+    pub points: Option<usize>,
+    #[arg(long)]
+    pub crop: Option<usize>,
+    /// Only time the inference engine (weights from --resume, else random) and exit.
+    #[arg(long)]
+    pub bench_engine: bool,
+    /// Hide the progress bar.
+    #[arg(long)]
+    pub quiet: bool,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let set = load_object_set(&args.objects, args.scale)
+        .with_context(|| format!("loading object set '{}'", args.objects))?;
+    if args.bench_engine {
+        return bench(&set, args.resume.as_deref());
+    }
+    let source = match &args.dataset {
+        Some(dir) => Source::bop(dir, &set)?,
+        None => Source::Rendered,
+    };
+    if args.validate_only {
+        let path = args
+            .resume
+            .as_ref()
+            .context("--validate-only needs --resume FILE")?;
+        let v = validate_file(&set, &source, path, args.val_frames, args.val_samples)?;
+        println!("{}", fusepose_train::validate::summary(&v));
+        return Ok(());
+    }
+    let mut config = fusepose_estimator::net::NetConfig::new(set.len());
+    if let Some(n) = args.points {
+        config.num_points = n;
+    }
+    if let Some(s) = args.crop {
+        config.crop_size = s;
+    }
+    config
+        .validate()
+        .map_err(|e| anyhow::anyhow!("network config: {e}"))?;
+    let opts = TrainOptions {
+        out: args.out,
+        minutes: args.minutes,
+        steps: args.steps,
+        resume: args.resume,
+        stage: match args.stage {
+            StageArg::Pose => Stage::Pose,
+            StageArg::Refine => Stage::Refine,
+            StageArg::Both => Stage::Both,
+        },
+        batch: args.batch,
+        seed: args.seed,
+        lr: args.lr,
+        loss_points: 500,
+        checkpoint_dir: args.checkpoint_dir,
+        checkpoint_every: Duration::from_secs_f64(args.checkpoint_minutes * 60.0),
+        log: args.log,
+        val_frames: args.val_frames,
+        val_max_samples: args.val_samples,
+        config: Some(config),
+        data_desc: match &args.dataset {
+            Some(d) => format!("{} objects, BOP frames from {}", args.objects, d.display()),
+            None => format!(
+                "{} objects, tabletop scenes rendered on the fly with sensor noise",
+                args.objects
+            ),
+        },
+        source,
+        progress: !args.quiet,
+    };
+    let summary = train(Arc::new(set), &opts)?;
+    println!(
+        "trained {} steps ({} samples, {:.0} s, {:.0} ms/step) -> {}",
+        summary.record.steps,
+        summary.record.samples,
+        summary.record.seconds,
+        summary.step_ms,
+        summary.out.display()
+    );
+    println!("{}", fusepose_train::validate::summary(&summary.validation));
+    Ok(())
+}
+
+/// `--bench-engine`: ms per object and GFLOP/s for 1/2 threads and 1/5 objects per frame.
+fn bench(set: &fusepose_scene::ObjectSet, weights: Option<&std::path::Path>) -> anyhow::Result<()> {
+    use fusepose_estimator::net::WeightFile;
+    let file = match weights {
+        Some(p) => WeightFile::read(p)?,
+        None => fusepose_train::bench::random_weights(set)?,
+    };
+    let c = &file.config;
+    println!(
+        "network: {} parameters, N={} S={}, {:.1} MFLOP per object (pose net + {} refiner iterations)",
+        c.parameter_count(),
+        c.num_points,
+        c.crop_size,
+        c.flops_per_object(c.num_points, c.crop_size, c.refine_iters) / 1e6,
+        c.refine_iters
+    );
+    for (instances, threads) in [(1, 1), (5, 1), (5, 2)] {
+        let r = fusepose_train::bench::engine_speed(&file, set, instances, threads, 40)?;
+        println!(
+            "{} objects/frame, {} thread(s): {:.2} ms per object, {:.1} GFLOP/s",
+            r.instances, r.threads, r.ms_per_object, r.gflops
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,177 @@
+//! `fusepose watch`: print pose messages as they arrive (object name, position
+//! in mm, roll/pitch/yaw in degrees, confidence, capture → publish latency).
+//!
+//! Names are those of the built-in object set (`class <id>` beyond it).
+//! The iceoryx2 namespace comes from `FUSEPOSE_IOX2_ROOT` / `FUSEPOSE_IOX2_PREFIX`.
+
+use std::time::{Duration, Instant};
+
+use fusepose_client::{Consumer, Ipc, IpcOptions, PoseMessage, PoseStatus, WireObjectPose};
+
+#[derive(clap::Args)]
+pub struct Args {
+    /// Camera name.
+    #[arg(long, default_value = "cam0")]
+    pub name: String,
+    /// One JSON object per message instead of text.
+    #[arg(long)]
+    pub json: bool,
+    /// Exit after this many messages.
+    #[arg(long)]
+    pub count: Option<u64>,
+    /// Exit after this many seconds without a message (default: wait forever).
+    #[arg(long)]
+    pub idle_timeout_s: Option<f64>,
+}
+
+fn object_name(class_id: u16) -> String {
+    let names = fusepose_scene::builtin::BUILTIN_NAMES;
+    match (class_id as usize).checked_sub(1).and_then(|i| names.get(i)) {
+        Some(name) => (*name).to_owned(),
+        None => format!("class {class_id}"),
+    }
+}
+
+/// Roll, pitch, yaw (rad) of a unit quaternion `[x, y, z, w]`, with R = Rz(yaw) · Ry(pitch) · Rx(roll).
+pub fn rpy_from_quaternion(q: [f64; 4]) -> [f64; 3] {
+    let [x, y, z, w] = q;
+    let sin_pitch = (2.0 * (w * y - z * x)).clamp(-1.0, 1.0);
+    let pitch = sin_pitch.asin();
+    if sin_pitch.abs() > 1.0 - 1e-9 {
+        // Gimbal lock: only yaw − roll is defined; report it all as yaw
+        // (the general formulas turn rounding noise into ±π here).
+        return [0.0, pitch, 2.0 * z.atan2(w)];
+    }
+    let roll = (2.0 * (w * x + y * z)).atan2(1.0 - 2.0 * (x * x + y * y));
+    let yaw = (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z));
+    [roll, pitch, yaw]
+}
+
+fn status_words(msg: &PoseMessage) -> Vec<&'static str> {
+    let flags = [
+        (PoseStatus::OK, "ok"),
+        (PoseStatus::INVALID_FRAME, "invalid_frame"),
+        (PoseStatus::DEADLINE_MISSED, "deadline_missed"),
+        (PoseStatus::DEGRADED, "degraded"),
+        (PoseStatus::ESTIMATOR_FAILED, "estimator_failed"),
+    ];
+    flags.iter().filter(|(bit, _)| msg.status & bit != 0).map(|(_, word)| *word).collect()
+}
+
+fn text(msg: &PoseMessage) -> String {
+    let mut out = format!(
+        "frame {:>6}  {:>7.2} ms  {}",
+        msg.frame_sequence,
+        msg.latency_ns() as f64 / 1e6,
+        status_words(msg).join(",")
+    );
+    if let Some(reason) = msg.invalid() {
+        out.push_str(&format!(" ({})", reason.name()));
+    }
+    for o in msg.objects() {
+        let t = o.translation_m.map(|v| v * 1e3);
+        let rpy = rpy_from_quaternion(o.quaternion).map(f64::to_degrees);
+        out.push_str(&format!(
+            "\n  {:<16} #{:<2} xyz [{:>8.1} {:>8.1} {:>8.1}] mm  rpy [{:>7.1} {:>7.1} {:>7.1}] deg  conf {:.2}",
+            object_name(o.class_id),
+            o.instance_id,
+            t[0],
+            t[1],
+            t[2],
+            rpy[0],
+            rpy[1],
+            rpy[2],
+            o.confidence
+        ));
+    }
+    out
+}
+
+fn json_object(o: &WireObjectPose) -> String {
+    let t = o.translation_m.map(|v| v * 1e3);
+    let rpy = rpy_from_quaternion(o.quaternion).map(f64::to_degrees);
+    let q = o.quaternion;
+    format!(
+        "{{\"class_id\":{},\"name\":{:?},\"instance_id\":{},\"xyz_mm\":[{:.3},{:.3},{:.3}],\"rpy_deg\":[{:.3},{:.3},{:.3}],\"quaternion_xyzw\":[{:.6},{:.6},{:.6},{:.6}],\"confidence\":{:.4},\"refine_iterations\":{},\"mask_pixels\":{},\"bbox\":[{},{},{},{}]}}",
+        o.class_id,
+        object_name(o.class_id),
+        o.instance_id,
+        t[0],
+        t[1],
+        t[2],
+        rpy[0],
+        rpy[1],
+        rpy[2],
+        q[0],
+        q[1],
+        q[2],
+        q[3],
+        o.confidence,
+        o.refine_iterations,
+        o.mask_pixels,
+        o.bbox[0],
+        o.bbox[1],
+        o.bbox[2],
+        o.bbox[3]
+    )
+}
+
+fn json(msg: &PoseMessage) -> String {
+    let objects: Vec<String> = msg.objects().iter().map(json_object).collect();
+    let status: Vec<String> = status_words(msg).iter().map(|s| format!("{s:?}")).collect();
+    format!(
+        "{{\"camera_id\":{},\"frame_sequence\":{},\"status\":[{}],\"invalid_reason\":{:?},\"capture_time_ns\":{},\"received_time_ns\":{},\"published_time_ns\":{},\"latency_ms\":{:.3},\"stage_ns\":{:?},\"objects\":[{}]}}",
+        msg.camera_id,
+        msg.frame_sequence,
+        status.join(","),
+        msg.invalid().map_or("", |r| r.name()),
+        msg.capture_time_ns,
+        msg.received_time_ns,
+        msg.published_time_ns,
+        msg.latency_ns() as f64 / 1e6,
+        msg.stage_ns,
+        objects.join(",")
+    )
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("fusepose-watch"))?;
+    let mut consumer = Consumer::open(&ipc, &args.name)?;
+    let idle = args.idle_timeout_s.map(Duration::from_secs_f64);
+    let mut last = Instant::now();
+    let mut seen = 0u64;
+    while args.count.is_none_or(|n| seen < n) {
+        match consumer.wait(Duration::from_millis(500))? {
+            Some(msg) => {
+                last = Instant::now();
+                seen += 1;
+                println!("{}", if args.json { json(&msg) } else { text(&msg) });
+            }
+            None => {
+                if idle.is_some_and(|d| last.elapsed() >= d) {
+                    anyhow::bail!("no pose message on camera {} for {:?}", args.name, idle.unwrap_or_default());
+                }
+            }
+        }
+    }
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn rpy_of_basic_rotations() {
+        let h = std::f64::consts::FRAC_1_SQRT_2;
+        let close = |a: [f64; 3], b: [f64; 3]| a.iter().zip(b).all(|(x, y)| (x - y).abs() < 1e-9);
+        assert!(close(rpy_from_quaternion([0.0, 0.0, 0.0, 1.0]), [0.0; 3]));
+        assert!(close(rpy_from_quaternion([h, 0.0, 0.0, h]), [std::f64::consts::FRAC_PI_2, 0.0, 0.0]));
+        assert!(close(rpy_from_quaternion([0.0, 0.0, h, h]), [0.0, 0.0, std::f64::consts::FRAC_PI_2]));
+        assert!(close(rpy_from_quaternion([0.0, 0.5f64.sqrt(), 0.0, h]), [0.0, std::f64::consts::FRAC_PI_2, 0.0]));
+        // Gimbal lock with yaw: qz(60°)·qy(90°) = h·[−sin30°, cos30°, sin30°, cos30°].
+        let (s30, c30) = (0.5, 0.75f64.sqrt());
+        let r = rpy_from_quaternion([-h * s30, h * c30, h * s30, h * c30]);
+        assert!(close(r, [0.0, std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_3]), "{r:?}");
+    }
+}

@@ -1,0 +1,151 @@
+//! The robot side: wait for pose messages; and the stats query client.
+
+use std::time::{Duration, Instant};
+
+use iceoryx2::port::client::Client;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::subscriber::Subscriber;
+use iceoryx2::prelude::*;
+
+use crate::services::CameraServices;
+use crate::{ClientError, Ipc, PoseMessage, StatsRequest, StatsSnapshot, WIRE_VERSION};
+
+/// Receives the pose messages of one camera.
+pub struct Consumer {
+    services: CameraServices,
+    subscriber: Subscriber<ipc::Service, PoseMessage, ()>,
+    listener: Listener<ipc::Service>,
+}
+
+impl Consumer {
+    /// Subscribes to the poses of camera `camera` (the daemon need not run yet).
+    pub fn open(ipc: &Ipc, camera: &str) -> Result<Self, ClientError> {
+        let services = CameraServices::open(ipc, camera)?;
+        let subscriber = services.poses.subscriber_builder().create().map_err(|e| ClientError::Port {
+            service: services.poses_name.clone(),
+            port: "subscriber",
+            detail: format!("{e:?}"),
+        })?;
+        let listener = services.pose_events.listener_builder().create().map_err(|e| ClientError::Port {
+            service: services.poses_name.clone(),
+            port: "listener",
+            detail: format!("{e:?}"),
+        })?;
+        Ok(Self { services, subscriber, listener })
+    }
+
+    /// The listener woken on every pose message, to attach to a caller's WaitSet.
+    pub fn listener(&self) -> &Listener<ipc::Service> {
+        &self.listener
+    }
+
+    /// Takes every pose message received since the last call and returns the
+    /// newest (None when nothing new arrived). Never blocks.
+    pub fn latest(&mut self) -> Result<Option<PoseMessage>, ClientError> {
+        let mut newest = None;
+        loop {
+            let received = self.subscriber.receive().map_err(|e| ClientError::Transfer {
+                service: self.services.poses_name.clone(),
+                operation: "receive",
+                detail: format!("{e:?}"),
+            })?;
+            let Some(sample) = received else { break };
+            let msg = *sample.payload();
+            if msg.format_version != WIRE_VERSION {
+                return Err(ClientError::MessageVersionMismatch {
+                    service: self.services.poses_name.clone(),
+                    what: "pose message",
+                    got: msg.format_version,
+                    ours: WIRE_VERSION,
+                });
+            }
+            newest = Some(msg);
+        }
+        Ok(newest)
+    }
+
+    /// Every pose message received since the last call, oldest first (at most
+    /// the subscriber buffer; older ones were overwritten).
+    pub fn drain(&mut self, out: &mut Vec<PoseMessage>) -> Result<(), ClientError> {
+        while let Some(sample) = self.subscriber.receive().map_err(|e| ClientError::Transfer {
+            service: self.services.poses_name.clone(),
+            operation: "receive",
+            detail: format!("{e:?}"),
+        })? {
+            out.push(*sample.payload());
+        }
+        Ok(())
+    }
+
+    /// Blocks until a new pose message arrives or `timeout` passes; returns the newest.
+    pub fn wait(&mut self, timeout: Duration) -> Result<Option<PoseMessage>, ClientError> {
+        if self.wait_ready(timeout)? { self.latest() } else { Ok(None) }
+    }
+
+    /// Blocks until at least one pose message is waiting (true) or `timeout` passes (false);
+    /// takes nothing (use [`Consumer::latest`] or [`Consumer::drain`]).
+    pub fn wait_ready(&self, timeout: Duration) -> Result<bool, ClientError> {
+        let deadline = Instant::now() + timeout;
+        let transfer = |operation, detail: String| ClientError::Transfer {
+            service: self.services.poses_name.clone(),
+            operation,
+            detail,
+        };
+        loop {
+            // Consume pending wake-ups first so the next wait really blocks.
+            let _ = self.listener.try_wait(|_| {});
+            if self.subscriber.has_samples().map_err(|e| transfer("receive", format!("{e:?}")))? {
+                return Ok(true);
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Ok(false);
+            }
+            self.listener.timed_wait(|_| {}, deadline - now).map_err(|e| transfer("wait", format!("{e:?}")))?;
+        }
+    }
+}
+
+/// Asks the daemon for its stats snapshot of one camera.
+pub struct StatsClient {
+    services: CameraServices,
+    client: Client<ipc::Service, StatsRequest, (), StatsSnapshot, ()>,
+}
+
+impl StatsClient {
+    pub fn open(ipc: &Ipc, camera: &str) -> Result<Self, ClientError> {
+        let services = CameraServices::open(ipc, camera)?;
+        let client = services.stats.client_builder().create().map_err(|e| ClientError::Port {
+            service: services.stats_name.clone(),
+            port: "client",
+            detail: format!("{e:?}"),
+        })?;
+        Ok(Self { services, client })
+    }
+
+    /// Sends one request and waits up to `timeout` for the snapshot.
+    pub fn query(&self, timeout: Duration) -> Result<StatsSnapshot, ClientError> {
+        let service = &self.services.stats_name;
+        let transfer = |operation, e: String| ClientError::Transfer { service: service.clone(), operation, detail: e };
+        let deadline = Instant::now() + timeout;
+        let pending = self.client.send_copy(StatsRequest::default()).map_err(|e| transfer("send", format!("{e:?}")))?;
+        loop {
+            if let Some(response) = pending.receive().map_err(|e| transfer("receive", format!("{e:?}")))? {
+                let snapshot = *response.payload();
+                if snapshot.format_version != WIRE_VERSION {
+                    return Err(ClientError::MessageVersionMismatch {
+                        service: service.clone(),
+                        what: "stats snapshot",
+                        got: snapshot.format_version,
+                        ours: WIRE_VERSION,
+                    });
+                }
+                return Ok(snapshot);
+            }
+            if Instant::now() >= deadline {
+                return Err(ClientError::Timeout { service: service.clone(), timeout_ms: timeout.as_millis() as u64 });
+            }
+            std::thread::sleep(Duration::from_millis(2));
+        }
+    }
+}

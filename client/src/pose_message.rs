@@ -1,0 +1,203 @@
+//! Pose wire format: one fixed-size `#[repr(C)]` message per processed frame.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+/// Most object poses one message carries.
+pub const MAX_OBJECTS: usize = 32;
+
+/// One object's pose in the camera optical frame (80 bytes, no padding).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("fusepose::WireObjectPose")]
+pub struct WireObjectPose {
+    /// Class id in the daemon's object set (1-based).
+    pub class_id: u16,
+    /// Instance index within the frame.
+    pub instance_id: u16,
+    /// ICP iterations, or refiner iterations of the network.
+    pub refine_iterations: u16,
+    pub _reserved: u16,
+    /// Estimator confidence in [0, 1].
+    pub confidence: f32,
+    /// Pixels of the instance mask.
+    pub mask_pixels: u32,
+    /// [u_min, v_min, u_max, v_max] inclusive, pixels.
+    pub bbox: [u16; 4],
+    /// Rotation object → camera, unit quaternion `[x, y, z, w]`.
+    pub quaternion: [f64; 4],
+    /// Translation object → camera, metres.
+    pub translation_m: [f64; 3],
+}
+
+const _: () = assert!(core::mem::size_of::<WireObjectPose>() == 80);
+
+/// Bits of [`PoseMessage::status`].
+pub struct PoseStatus;
+
+impl PoseStatus {
+    /// The estimator ran and the poses are valid.
+    pub const OK: u32 = 1 << 0;
+    /// The frame was rejected; see [`PoseMessage::invalid_reason`]. No objects.
+    pub const INVALID_FRAME: u32 = 1 << 1;
+    /// Published later than the configured deadline after capture.
+    pub const DEADLINE_MISSED: u32 = 1 << 2;
+    /// Results are usable but reduced (more instances than fit, an estimator error on some objects).
+    pub const DEGRADED: u32 = 1 << 3;
+    /// The estimator failed on this frame (no objects).
+    pub const ESTIMATOR_FAILED: u32 = 1 << 4;
+}
+
+/// Why a frame was rejected (wire code in [`PoseMessage::invalid_reason`], index in stats).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum InvalidReason {
+    None = 0,
+    BadMagic = 1,
+    VersionMismatch = 2,
+    HeaderSize = 3,
+    BadSize = 4,
+    UnknownFormat = 5,
+    BadIntrinsics = 6,
+    BadDepthScale = 7,
+    PlaneOutOfBounds = 8,
+    PlaneLength = 9,
+    PlaneMisaligned = 10,
+    PlaneOverlap = 11,
+    WrongCamera = 12,
+    EstimatorRefused = 13,
+}
+
+impl InvalidReason {
+    /// Number of codes (size of per-reason counters).
+    pub const COUNT: usize = 14;
+
+    pub const ALL: [InvalidReason; Self::COUNT] = [
+        Self::None,
+        Self::BadMagic,
+        Self::VersionMismatch,
+        Self::HeaderSize,
+        Self::BadSize,
+        Self::UnknownFormat,
+        Self::BadIntrinsics,
+        Self::BadDepthScale,
+        Self::PlaneOutOfBounds,
+        Self::PlaneLength,
+        Self::PlaneMisaligned,
+        Self::PlaneOverlap,
+        Self::WrongCamera,
+        Self::EstimatorRefused,
+    ];
+
+    pub fn from_code(code: u32) -> Option<Self> {
+        Self::ALL.get(code as usize).copied()
+    }
+
+    /// snake_case name for logs, tables and JSON.
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::None => "none",
+            Self::BadMagic => "bad_magic",
+            Self::VersionMismatch => "version_mismatch",
+            Self::HeaderSize => "header_size",
+            Self::BadSize => "bad_size",
+            Self::UnknownFormat => "unknown_format",
+            Self::BadIntrinsics => "bad_intrinsics",
+            Self::BadDepthScale => "bad_depth_scale",
+            Self::PlaneOutOfBounds => "plane_out_of_bounds",
+            Self::PlaneLength => "plane_length",
+            Self::PlaneMisaligned => "plane_misaligned",
+            Self::PlaneOverlap => "plane_overlap",
+            Self::WrongCamera => "wrong_camera",
+            Self::EstimatorRefused => "estimator_refused",
+        }
+    }
+}
+
+/// The poses of one frame, published on `fusepose/camera/<name>/poses`.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("fusepose::PoseMessage")]
+pub struct PoseMessage {
+    /// [`crate::WIRE_VERSION`].
+    pub format_version: u16,
+    /// Valid entries at the start of `objects`.
+    pub object_count: u16,
+    /// [`PoseStatus`] bits.
+    pub status: u32,
+    /// [`InvalidReason`] code when `status` has [`PoseStatus::INVALID_FRAME`], else 0.
+    pub invalid_reason: u32,
+    pub camera_id: u32,
+    /// Sequence number of the frame these poses belong to.
+    pub frame_sequence: u64,
+    /// Frame capture time (from the frame header), `CLOCK_MONOTONIC` ns.
+    pub capture_time_ns: u64,
+    /// When the daemon took the frame from shared memory.
+    pub received_time_ns: u64,
+    /// When the daemon published this message.
+    pub published_time_ns: u64,
+    /// Duration of each [`crate::Stage`] (ingest … publish) for this frame, ns; 0 = stage not run.
+    pub stage_ns: [u64; 6],
+    pub objects: [WireObjectPose; MAX_OBJECTS],
+}
+
+const _: () = assert!(core::mem::size_of::<PoseMessage>() == 2656);
+
+impl Default for PoseMessage {
+    fn default() -> Self {
+        Self {
+            format_version: crate::WIRE_VERSION,
+            object_count: 0,
+            status: 0,
+            invalid_reason: 0,
+            camera_id: 0,
+            frame_sequence: 0,
+            capture_time_ns: 0,
+            received_time_ns: 0,
+            published_time_ns: 0,
+            stage_ns: [0; 6],
+            objects: [WireObjectPose::default(); MAX_OBJECTS],
+        }
+    }
+}
+
+impl PoseMessage {
+    /// The valid object poses (`object_count` clamped to [`MAX_OBJECTS`]).
+    pub fn objects(&self) -> &[WireObjectPose] {
+        &self.objects[..(self.object_count as usize).min(MAX_OBJECTS)]
+    }
+
+    pub fn is_ok(&self) -> bool {
+        self.status & PoseStatus::OK != 0
+    }
+
+    /// The rejection reason, when the frame was rejected.
+    pub fn invalid(&self) -> Option<InvalidReason> {
+        if self.status & PoseStatus::INVALID_FRAME == 0 {
+            return None;
+        }
+        Some(InvalidReason::from_code(self.invalid_reason).unwrap_or(InvalidReason::None))
+    }
+
+    /// Capture → publish latency, ns.
+    pub fn latency_ns(&self) -> u64 {
+        self.published_time_ns.saturating_sub(self.capture_time_ns)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn reason_codes_round_trip() {
+        for r in InvalidReason::ALL {
+            assert_eq!(InvalidReason::from_code(r as u32), Some(r));
+        }
+        assert_eq!(InvalidReason::from_code(99), None);
+    }
+
+    #[test]
+    fn objects_clamps_a_corrupt_count() {
+        let msg = PoseMessage { object_count: 1000, ..PoseMessage::default() };
+        assert_eq!(msg.objects().len(), MAX_OBJECTS);
+    }
+}

@@ -1,0 +1,135 @@
+//! Stats wire format: request and snapshot of the daemon's counters and latency histograms.
+
+use iceoryx2::prelude::ZeroCopySend;
+
+use crate::InvalidReason;
+
+/// Pipeline stages timed per frame (index into `stage_ns` and the stats arrays).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum Stage {
+    /// Take the newest frame from shared memory, validate it, build the view.
+    Ingest = 0,
+    /// Segmentation network (0 when the producer supplies labels).
+    Segmentation = 1,
+    /// Instances from labels, point sampling, colour crops (`Workspace::prepare`).
+    Sampling = 2,
+    /// Pose network (the fusion estimator).
+    Network = 3,
+    /// Iterative refinement (ICP, or the network's refiner when reported apart).
+    Refine = 4,
+    /// Write the pose message into shared memory, send, notify.
+    Publish = 5,
+}
+
+/// Number of [`Stage`]s.
+pub const STAGE_COUNT: usize = 6;
+/// Stages plus end-to-end (capture → publish), the last entry of the stats arrays.
+pub const TIMELINE_COUNT: usize = STAGE_COUNT + 1;
+
+impl Stage {
+    pub const ALL: [Stage; STAGE_COUNT] =
+        [Self::Ingest, Self::Segmentation, Self::Sampling, Self::Network, Self::Refine, Self::Publish];
+
+    pub fn name(self) -> &'static str {
+        match self {
+            Self::Ingest => "ingest",
+            Self::Segmentation => "segmentation",
+            Self::Sampling => "sampling",
+            Self::Network => "network",
+            Self::Refine => "refine",
+            Self::Publish => "publish",
+        }
+    }
+
+    /// Names of the stats timelines: the stages, then `end_to_end`.
+    pub fn timeline_names() -> [&'static str; TIMELINE_COUNT] {
+        ["ingest", "segmentation", "sampling", "network", "refine", "publish", "end_to_end"]
+    }
+}
+
+/// A stats query (the daemon answers with one [`StatsSnapshot`]).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("fusepose::StatsRequest")]
+pub struct StatsRequest {
+    pub format_version: u16,
+    pub _reserved: [u8; 6],
+}
+
+impl Default for StatsRequest {
+    fn default() -> Self {
+        Self { format_version: crate::WIRE_VERSION, _reserved: [0; 6] }
+    }
+}
+
+/// Percentiles of one latency histogram, ns (all 0 when `count` is 0).
+#[repr(C)]
+#[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
+#[type_name("fusepose::LatencySummary")]
+pub struct LatencySummary {
+    pub count: u64,
+    pub p50_ns: u64,
+    pub p90_ns: u64,
+    pub p99_ns: u64,
+    pub p999_ns: u64,
+    pub max_ns: u64,
+}
+
+/// The daemon's counters and latency percentiles for one camera.
+#[repr(C)]
+#[derive(Clone, Copy, Debug, PartialEq, ZeroCopySend)]
+#[type_name("fusepose::StatsSnapshot")]
+pub struct StatsSnapshot {
+    pub format_version: u16,
+    pub _reserved: u16,
+    pub camera_id: u32,
+    /// Daemon uptime, ns.
+    pub uptime_ns: u64,
+    /// Length of the window `last_window` covers (the last completed one), ns.
+    pub window_ns: u64,
+    /// Deadline from capture to publish, ns.
+    pub deadline_ns: u64,
+    /// Frames taken from shared memory (including ones dropped as stale).
+    pub frames_received: u64,
+    /// Frames run through the estimator and published as poses.
+    pub frames_processed: u64,
+    /// Frames received but superseded by a newer one before processing.
+    pub frames_skipped_stale: u64,
+    /// Sequence numbers never received (gaps: dropped by the producer or overwritten in the buffer).
+    pub frames_missed_sequence: u64,
+    /// Frames rejected as invalid (sum of `invalid_by_reason`).
+    pub frames_invalid: u64,
+    /// Rejections per [`InvalidReason`] code.
+    pub invalid_by_reason: [u64; InvalidReason::COUNT],
+    /// Published later than `deadline_ns` after capture.
+    pub deadline_misses: u64,
+    /// Frames where the estimator failed.
+    pub estimator_failures: u64,
+    /// Per [`Stage`] then end-to-end, since the daemon started.
+    pub since_start: [LatencySummary; TIMELINE_COUNT],
+    /// Per [`Stage`] then end-to-end, over `window_ns`.
+    pub last_window: [LatencySummary; TIMELINE_COUNT],
+}
+
+impl Default for StatsSnapshot {
+    fn default() -> Self {
+        Self {
+            format_version: crate::WIRE_VERSION,
+            _reserved: 0,
+            camera_id: 0,
+            uptime_ns: 0,
+            window_ns: 0,
+            deadline_ns: 0,
+            frames_received: 0,
+            frames_processed: 0,
+            frames_skipped_stale: 0,
+            frames_missed_sequence: 0,
+            frames_invalid: 0,
+            invalid_by_reason: [0; InvalidReason::COUNT],
+            deadline_misses: 0,
+            estimator_failures: 0,
+            since_start: [LatencySummary::default(); TIMELINE_COUNT],
+            last_window: [LatencySummary::default(); TIMELINE_COUNT],
+        }
+    }
+}

@@ -1,0 +1,21 @@
+//! # fusepose-daemon — `fuseposed`, the loop that turns frames into poses
+//!
+//! Ingest from iceoryx2, validation, the estimator on preallocated buffers,
+//! deadline accounting, HdrHistogram latency histograms and stats. May touch
+//! the client (IPC) and the estimator; never the trainer.
+//!
+//! The loop is single-threaded: iceoryx2 `ipc` ports are not `Send`, and a
+//! frame is processed while its shared-memory sample is borrowed.
+
+pub mod camera;
+pub mod config;
+pub mod counters;
+pub mod engine;
+pub mod event_loop;
+pub mod frame_view;
+pub mod interval_log;
+pub mod latency;
+pub mod rate_limited_log;
+
+pub use config::{DaemonConfig, EstimatorKind};
+pub use event_loop::{RunReport, run};

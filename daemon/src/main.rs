@@ -1,0 +1,65 @@
+//! `fuseposed --config config/fuseposed.toml`: the pose daemon's entry point.
+
+use std::path::PathBuf;
+use std::process::ExitCode;
+
+use clap::Parser;
+use fusepose_daemon::{DaemonConfig, engine};
+
+/// fuseposed: serves 6D object poses for iceoryx2 cameras.
+#[derive(Parser)]
+#[command(name = "fuseposed", version, about)]
+struct Args {
+    /// Configuration file (TOML). Without it every key takes its default.
+    #[arg(long)]
+    config: Option<PathBuf>,
+    /// Check the configuration and exit.
+    #[arg(long)]
+    check: bool,
+}
+
+fn main() -> ExitCode {
+    let args = Args::parse();
+    let config = match &args.config {
+        Some(path) => DaemonConfig::load(path),
+        None => Ok(DaemonConfig::default()),
+    };
+    let config = match config {
+        Ok(c) => c,
+        Err(e) => {
+            eprintln!("fuseposed: configuration error: {e}");
+            return ExitCode::from(2);
+        }
+    };
+    let filter = tracing_subscriber::EnvFilter::try_from_env("FUSEPOSE_LOG")
+        .or_else(|_| tracing_subscriber::EnvFilter::try_new(&config.log_level));
+    let filter = match filter {
+        Ok(f) => f,
+        Err(e) => {
+            eprintln!("fuseposed: configuration error: log_level = {:?}: {e}", config.log_level);
+            return ExitCode::from(2);
+        }
+    };
+    let ansi = std::io::IsTerminal::is_terminal(&std::io::stderr());
+    tracing_subscriber::fmt().with_env_filter(filter).with_ansi(ansi).with_writer(std::io::stderr).init();
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Warn);
+
+    let spec = match engine::resolve(&config.estimator) {
+        Ok(s) => s,
+        Err(e) => {
+            eprintln!("fuseposed: configuration error: {e:#}");
+            return ExitCode::from(2);
+        }
+    };
+    if args.check {
+        println!("configuration ok: cameras {:?}, estimator {}", config.cameras, spec.description);
+        return ExitCode::SUCCESS;
+    }
+    match fusepose_daemon::run(&config, &spec, None) {
+        Ok(_) => ExitCode::SUCCESS,
+        Err(e) => {
+            tracing::error!("fuseposed failed: {e:#}");
+            ExitCode::FAILURE
+        }
+    }
+}

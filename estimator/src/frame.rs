@@ -1,0 +1,345 @@
+//! A borrowed view of one RGB-D frame and its validation.
+//!
+//! Every frame that reaches the estimator comes from another process (shared
+//! memory), a dataset or the renderer, so [`FrameView::validate`] checks
+//! everything the rest of the crate relies on before any pixel is read: image
+//! size, intrinsics, plane lengths and the depth scale. Each failure is a
+//! distinct [`FrameError`] variant with a stable [`FrameError::reason_code`].
+
+use fusepose_scene::Intrinsics;
+
+/// Largest accepted image side, pixels.
+pub const MAX_IMAGE_SIDE: u32 = 4096;
+
+/// Byte order of the colour plane (3 bytes per pixel, row-major).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum ColorFormat {
+    Rgb8,
+    Bgr8,
+}
+
+/// The depth plane: u16 units times `scale` metres (0 = no measurement), or f32 metres
+/// (0, NaN or infinity = no measurement).
+#[derive(Clone, Copy, Debug)]
+pub enum DepthPlane<'a> {
+    U16 { data: &'a [u16], scale: f32 },
+    F32(&'a [f32]),
+}
+
+impl DepthPlane<'_> {
+    /// Number of values in the plane.
+    pub fn len(&self) -> usize {
+        match self {
+            DepthPlane::U16 { data, .. } => data.len(),
+            DepthPlane::F32(data) => data.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Depth of value `index` in metres, `None` when there is no valid
+    /// measurement (0, negative, NaN, infinity) or the index is out of range.
+    #[inline]
+    pub fn metres(&self, index: usize) -> Option<f32> {
+        let z = match self {
+            DepthPlane::U16 { data, scale } => *data.get(index)? as f32 * *scale,
+            DepthPlane::F32(data) => *data.get(index)?,
+        };
+        (z.is_finite() && z > 0.0).then_some(z)
+    }
+}
+
+/// Per-pixel class ids (0 = background).
+#[derive(Clone, Copy, Debug)]
+pub enum LabelPlane<'a> {
+    U8(&'a [u8]),
+    U16(&'a [u16]),
+}
+
+impl LabelPlane<'_> {
+    /// Number of values in the plane.
+    pub fn len(&self) -> usize {
+        match self {
+            LabelPlane::U8(data) => data.len(),
+            LabelPlane::U16(data) => data.len(),
+        }
+    }
+
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+
+    /// Class id of value `index` (0 = background, also for an out-of-range index).
+    #[inline]
+    pub fn class_at(&self, index: usize) -> u16 {
+        match self {
+            LabelPlane::U8(data) => data.get(index).map_or(0, |&c| c as u16),
+            LabelPlane::U16(data) => data.get(index).copied().unwrap_or(0),
+        }
+    }
+}
+
+/// One RGB-D frame, borrowed (from shared memory, a dataset, or the renderer).
+///
+/// The image size is `intrinsics.width` x `intrinsics.height`; all planes are
+/// row-major, top row first.
+#[derive(Clone, Copy, Debug)]
+pub struct FrameView<'a> {
+    pub intrinsics: Intrinsics,
+    pub color_format: ColorFormat,
+    /// width * height * 3 bytes.
+    pub color: &'a [u8],
+    /// width * height values.
+    pub depth: DepthPlane<'a>,
+    /// width * height values, when the producer supplies labels.
+    pub labels: Option<LabelPlane<'a>>,
+}
+
+impl FrameView<'_> {
+    /// Image width in pixels.
+    pub fn width(&self) -> usize {
+        self.intrinsics.width as usize
+    }
+
+    /// Image height in pixels.
+    pub fn height(&self) -> usize {
+        self.intrinsics.height as usize
+    }
+
+    /// Checks everything later stages rely on; never panics.
+    ///
+    /// Accepted: width and height in 1..=[`MAX_IMAGE_SIDE`]; fx, fy finite
+    /// and positive; cx in [-0.5 w, 1.5 w] and cy in [-0.5 h, 1.5 h] (and
+    /// finite); colour plane w*h*3 bytes; depth and (when present) label
+    /// planes w*h values; a u16 depth scale finite and positive (metres per unit).
+    pub fn validate(&self) -> Result<(), FrameError> {
+        let k = &self.intrinsics;
+        if k.width == 0 || k.height == 0 || k.width > MAX_IMAGE_SIDE || k.height > MAX_IMAGE_SIDE {
+            return Err(FrameError::BadSize { width: k.width, height: k.height });
+        }
+        if !(k.fx.is_finite() && k.fx > 0.0 && k.fy.is_finite() && k.fy > 0.0) {
+            return Err(FrameError::BadFocalLength { fx: k.fx, fy: k.fy });
+        }
+        let (w, h) = (k.width as f64, k.height as f64);
+        let cx_ok = k.cx.is_finite() && k.cx >= -0.5 * w && k.cx <= 1.5 * w;
+        let cy_ok = k.cy.is_finite() && k.cy >= -0.5 * h && k.cy <= 1.5 * h;
+        if !(cx_ok && cy_ok) {
+            return Err(FrameError::BadPrincipalPoint { cx: k.cx, cy: k.cy });
+        }
+        let pixels = k.width as usize * k.height as usize;
+        if self.color.len() != pixels * 3 {
+            return Err(FrameError::PlaneSize { plane: "color", got: self.color.len(), expected: pixels * 3 });
+        }
+        if self.depth.len() != pixels {
+            return Err(FrameError::PlaneSize { plane: "depth", got: self.depth.len(), expected: pixels });
+        }
+        if let DepthPlane::U16 { scale, .. } = self.depth
+            && !(scale.is_finite() && scale > 0.0)
+        {
+            return Err(FrameError::BadDepthScale(scale));
+        }
+        if let Some(labels) = &self.labels
+            && labels.len() != pixels
+        {
+            return Err(FrameError::PlaneSize { plane: "labels", got: labels.len(), expected: pixels });
+        }
+        Ok(())
+    }
+}
+
+/// Why a frame was refused. Each variant is a distinct reason for stats; see
+/// [`FrameError::reason_code`] and [`FrameError::reason`].
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum FrameError {
+    #[error("image size {width}x{height} is outside 1..=4096")]
+    BadSize { width: u32, height: u32 },
+    /// Intrinsics inconsistent in a way not covered by a more specific variant.
+    #[error("intrinsics invalid: {0}")]
+    BadIntrinsics(&'static str),
+    #[error("focal length fx={fx}, fy={fy} is not a positive finite number of pixels")]
+    BadFocalLength { fx: f64, fy: f64 },
+    #[error("principal point ({cx}, {cy}) lies outside [-0.5, 1.5] x the image size")]
+    BadPrincipalPoint { cx: f64, cy: f64 },
+    #[error("{plane} plane has {got} values, expected {expected}")]
+    PlaneSize { plane: &'static str, got: usize, expected: usize },
+    #[error("depth scale {0} is not a positive finite number")]
+    BadDepthScale(f32),
+    /// The frame carries no label plane but the call needs one.
+    #[error("frame has no label plane")]
+    MissingLabels,
+}
+
+impl FrameError {
+    /// Stable numeric code per variant (never reused or renumbered), for the
+    /// daemon's counters and the wire. 0 is reserved for "no error".
+    pub fn reason_code(&self) -> u16 {
+        match self {
+            FrameError::BadSize { .. } => 1,
+            FrameError::BadIntrinsics(_) => 2,
+            FrameError::BadFocalLength { .. } => 3,
+            FrameError::BadPrincipalPoint { .. } => 4,
+            FrameError::PlaneSize { .. } => 5,
+            FrameError::BadDepthScale(_) => 6,
+            FrameError::MissingLabels => 7,
+        }
+    }
+
+    /// Stable short snake_case name per variant, for logs and stats tables.
+    pub fn reason(&self) -> &'static str {
+        match self {
+            FrameError::BadSize { .. } => "bad_size",
+            FrameError::BadIntrinsics(_) => "bad_intrinsics",
+            FrameError::BadFocalLength { .. } => "bad_focal_length",
+            FrameError::BadPrincipalPoint { .. } => "bad_principal_point",
+            FrameError::PlaneSize { .. } => "plane_size",
+            FrameError::BadDepthScale(_) => "bad_depth_scale",
+            FrameError::MissingLabels => "missing_labels",
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    const W: u32 = 8;
+    const H: u32 = 6;
+
+    fn intrinsics() -> Intrinsics {
+        Intrinsics { fx: 500.0, fy: 500.0, cx: 4.0, cy: 3.0, width: W, height: H }
+    }
+
+    struct Planes {
+        color: Vec<u8>,
+        depth: Vec<u16>,
+        labels: Vec<u8>,
+    }
+
+    fn planes() -> Planes {
+        let n = (W * H) as usize;
+        Planes { color: vec![0; n * 3], depth: vec![1000; n], labels: vec![0; n] }
+    }
+
+    fn frame(p: &Planes) -> FrameView<'_> {
+        FrameView {
+            intrinsics: intrinsics(),
+            color_format: ColorFormat::Rgb8,
+            color: &p.color,
+            depth: DepthPlane::U16 { data: &p.depth, scale: 0.001 },
+            labels: Some(LabelPlane::U8(&p.labels)),
+        }
+    }
+
+    #[test]
+    fn good_frame_passes() {
+        let p = planes();
+        assert_eq!(frame(&p).validate(), Ok(()));
+    }
+
+    #[test]
+    fn zero_and_oversized_sizes_are_refused() {
+        let p = planes();
+        for (w, h) in [(0, H), (W, 0), (4097, H), (W, 5000)] {
+            let mut f = frame(&p);
+            f.intrinsics.width = w;
+            f.intrinsics.height = h;
+            assert_eq!(f.validate(), Err(FrameError::BadSize { width: w, height: h }));
+        }
+    }
+
+    #[test]
+    fn bad_focal_lengths_are_refused() {
+        let p = planes();
+        for (fx, fy) in [(0.0, 500.0), (500.0, -1.0), (f64::NAN, 500.0), (500.0, f64::INFINITY)] {
+            let mut f = frame(&p);
+            f.intrinsics.fx = fx;
+            f.intrinsics.fy = fy;
+            let e = f.validate().unwrap_err();
+            assert!(matches!(e, FrameError::BadFocalLength { .. }), "{fx} {fy}: {e:?}");
+            assert_eq!(e.reason_code(), 3);
+        }
+    }
+
+    #[test]
+    fn principal_point_far_outside_is_refused() {
+        let p = planes();
+        // In range at the edges of the accepted band.
+        let mut f = frame(&p);
+        f.intrinsics.cx = -0.5 * W as f64;
+        f.intrinsics.cy = 1.5 * H as f64;
+        assert_eq!(f.validate(), Ok(()));
+        for (cx, cy) in [(-4.1, 3.0), (12.1, 3.0), (4.0, -3.1), (4.0, 9.1), (f64::NAN, 3.0)] {
+            let mut f = frame(&p);
+            f.intrinsics.cx = cx;
+            f.intrinsics.cy = cy;
+            assert!(matches!(f.validate(), Err(FrameError::BadPrincipalPoint { .. })), "{cx} {cy}");
+        }
+    }
+
+    #[test]
+    fn plane_size_mismatches_name_the_plane() {
+        let mut p = planes();
+        p.color.pop();
+        assert_eq!(
+            frame(&p).validate(),
+            Err(FrameError::PlaneSize { plane: "color", got: 143, expected: 144 })
+        );
+        let mut p = planes();
+        p.depth.push(0);
+        assert_eq!(frame(&p).validate(), Err(FrameError::PlaneSize { plane: "depth", got: 49, expected: 48 }));
+        let mut p = planes();
+        p.labels.clear();
+        assert_eq!(frame(&p).validate(), Err(FrameError::PlaneSize { plane: "labels", got: 0, expected: 48 }));
+        // A frame without labels is valid by itself.
+        let p = planes();
+        let mut f = frame(&p);
+        f.labels = None;
+        assert_eq!(f.validate(), Ok(()));
+    }
+
+    #[test]
+    fn bad_depth_scales_are_refused() {
+        let p = planes();
+        for scale in [0.0, -0.001, f32::NAN, f32::INFINITY] {
+            let mut f = frame(&p);
+            f.depth = DepthPlane::U16 { data: &p.depth, scale };
+            assert!(matches!(f.validate(), Err(FrameError::BadDepthScale(_))), "{scale}");
+        }
+    }
+
+    #[test]
+    fn reason_codes_are_distinct_and_stable() {
+        let all = [
+            FrameError::BadSize { width: 0, height: 0 },
+            FrameError::BadIntrinsics("x"),
+            FrameError::BadFocalLength { fx: 0.0, fy: 0.0 },
+            FrameError::BadPrincipalPoint { cx: 0.0, cy: 0.0 },
+            FrameError::PlaneSize { plane: "color", got: 0, expected: 1 },
+            FrameError::BadDepthScale(0.0),
+            FrameError::MissingLabels,
+        ];
+        let codes: Vec<u16> = all.iter().map(FrameError::reason_code).collect();
+        assert_eq!(codes, vec![1, 2, 3, 4, 5, 6, 7]);
+        let mut names: Vec<&str> = all.iter().map(FrameError::reason).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), all.len());
+    }
+
+    #[test]
+    fn depth_metres_rejects_invalid_values() {
+        let d = [0u16, 1500];
+        let plane = DepthPlane::U16 { data: &d, scale: 0.001 };
+        assert_eq!(plane.metres(0), None);
+        assert!((plane.metres(1).unwrap() - 1.5).abs() < 1e-6);
+        assert_eq!(plane.metres(2), None);
+        let f = [0.7f32, f32::NAN, -1.0, f32::INFINITY, 0.0];
+        let plane = DepthPlane::F32(&f);
+        assert_eq!(plane.metres(0), Some(0.7));
+        for i in 1..5 {
+            assert_eq!(plane.metres(i), None);
+        }
+    }
+}

@@ -1,0 +1,300 @@
+//! Object instances from a class-id label plane: connected components per class.
+//!
+//! Connectivity is **4-connected** (left, right, up, down): two pixels belong
+//! to the same instance when they share an edge and carry the same class id.
+//! Diagonal-only contact does not join instances, so two touching objects of
+//! one class that meet only at a corner stay separate.
+//!
+//! Components smaller than `min_pixels` are dropped, at most `max_instances`
+//! are kept (largest first; ties keep raster order of their first pixel), and
+//! class ids above `num_classes` are skipped and counted in [`LabelStats`].
+//!
+//! Allocation: [`InstanceFinder`] keeps a component-id buffer and a flood-fill
+//! stack of `width * height` entries. They are sized on the first frame and
+//! reused; they grow (allocate) only when a frame has more pixels than any
+//! frame before. Frames of a fixed size never allocate after the first.
+
+use crate::frame::LabelPlane;
+
+/// One connected component of a single class.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct Component {
+    pub class_id: u16,
+    /// Id of the component in [`InstanceFinder::component_ids`] (≥ 1).
+    pub component_id: u32,
+    /// Pixels in the component.
+    pub pixels: u32,
+    /// [u_min, v_min, u_max, v_max] inclusive, pixels.
+    pub bbox: [u16; 4],
+}
+
+/// Limits applied while finding instances.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct InstanceLimits {
+    /// Smallest component kept, pixels.
+    pub min_pixels: usize,
+    /// Most components kept (largest first).
+    pub max_instances: usize,
+    /// Largest valid class id; larger ids are skipped and counted. 0 accepts every id.
+    pub num_classes: u16,
+}
+
+/// What was skipped in one label plane (for the daemon's counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct LabelStats {
+    /// Pixels whose class id exceeds `num_classes`.
+    pub unknown_class_pixels: u32,
+    /// Largest unknown class id seen (0 when none).
+    pub max_unknown_class: u16,
+    /// Components dropped for having fewer than `min_pixels` pixels.
+    pub small_components: u32,
+    /// Components large enough but beyond `max_instances`.
+    pub over_max_instances: u32,
+}
+
+/// Reusable buffers for connected-component labelling.
+#[derive(Debug, Default)]
+pub struct InstanceFinder {
+    /// Per pixel: 0 = background/unknown/unvisited, otherwise the component id.
+    ids: Vec<u32>,
+    /// Flood-fill stack of pixel indices.
+    stack: Vec<u32>,
+    /// Kept components, sorted by pixel count, descending.
+    kept: Vec<Component>,
+    width: usize,
+    height: usize,
+    stats: LabelStats,
+}
+
+impl InstanceFinder {
+    /// Empty finder; buffers are sized on the first frame.
+    pub fn new() -> Self {
+        Self::default()
+    }
+
+    /// Finder with buffers preallocated for frames up to `pixels` pixels and
+    /// up to `max_instances` instances.
+    pub fn with_capacity(pixels: usize, max_instances: usize) -> Self {
+        Self {
+            ids: Vec::with_capacity(pixels),
+            stack: Vec::with_capacity(pixels),
+            kept: Vec::with_capacity(max_instances + 1),
+            ..Self::default()
+        }
+    }
+
+    /// Labels `labels` (`width * height` values, row-major) and returns the
+    /// kept components, largest first. A plane shorter than `width * height`
+    /// is read as background beyond its end (callers validate sizes first).
+    pub fn find(&mut self, labels: &LabelPlane<'_>, width: usize, height: usize, limits: InstanceLimits) -> &[Component] {
+        let n = width * height;
+        self.width = width;
+        self.height = height;
+        self.stats = LabelStats::default();
+        self.kept.clear();
+        if self.kept.capacity() < limits.max_instances + 1 {
+            self.kept.reserve(limits.max_instances + 1);
+        }
+        self.ids.clear();
+        self.ids.resize(n, 0);
+        if self.stack.capacity() < n {
+            self.stack.reserve(n - self.stack.len());
+        }
+        let mut next_id: u32 = 1;
+        for start in 0..n {
+            let class_id = labels.class_at(start);
+            if class_id == 0 || self.ids[start] != 0 {
+                continue;
+            }
+            if limits.num_classes != 0 && class_id > limits.num_classes {
+                self.stats.unknown_class_pixels += 1;
+                self.stats.max_unknown_class = self.stats.max_unknown_class.max(class_id);
+                continue;
+            }
+            let component = self.flood_fill(labels, start, class_id, next_id);
+            next_id += 1;
+            self.offer(component, limits);
+        }
+        &self.kept
+    }
+
+    /// The components kept by the last [`find`](Self::find), largest first.
+    pub fn components(&self) -> &[Component] {
+        &self.kept
+    }
+
+    /// What the last [`find`](Self::find) skipped.
+    pub fn stats(&self) -> LabelStats {
+        self.stats
+    }
+
+    /// Per-pixel component ids of the last frame (row-major, 0 = none).
+    pub fn component_ids(&self) -> &[u32] {
+        &self.ids
+    }
+
+    /// Size of the last frame, pixels.
+    pub fn frame_size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    fn flood_fill(&mut self, labels: &LabelPlane<'_>, start: usize, class_id: u16, id: u32) -> Component {
+        let (w, h) = (self.width, self.height);
+        let (mut u_min, mut v_min, mut u_max, mut v_max) = (usize::MAX, usize::MAX, 0, 0);
+        let mut pixels: u32 = 0;
+        self.stack.clear();
+        self.ids[start] = id;
+        self.stack.push(start as u32);
+        while let Some(p) = self.stack.pop() {
+            let p = p as usize;
+            let (u, v) = (p % w, p / w);
+            pixels += 1;
+            u_min = u_min.min(u);
+            u_max = u_max.max(u);
+            v_min = v_min.min(v);
+            v_max = v_max.max(v);
+            let visit = |q: usize, ids: &mut Vec<u32>, stack: &mut Vec<u32>| {
+                if ids[q] == 0 && labels.class_at(q) == class_id {
+                    ids[q] = id;
+                    stack.push(q as u32);
+                }
+            };
+            if u > 0 {
+                visit(p - 1, &mut self.ids, &mut self.stack);
+            }
+            if u + 1 < w {
+                visit(p + 1, &mut self.ids, &mut self.stack);
+            }
+            if v > 0 {
+                visit(p - w, &mut self.ids, &mut self.stack);
+            }
+            if v + 1 < h {
+                visit(p + w, &mut self.ids, &mut self.stack);
+            }
+        }
+        let clamp = |x: usize| x.min(u16::MAX as usize) as u16;
+        Component {
+            class_id,
+            component_id: id,
+            pixels,
+            bbox: [clamp(u_min), clamp(v_min), clamp(u_max), clamp(v_max)],
+        }
+    }
+
+    /// Keeps `c` if it is among the `max_instances` largest so far.
+    fn offer(&mut self, c: Component, limits: InstanceLimits) {
+        if (c.pixels as usize) < limits.min_pixels {
+            self.stats.small_components += 1;
+            return;
+        }
+        let at = self.kept.iter().position(|k| k.pixels < c.pixels).unwrap_or(self.kept.len());
+        if at >= limits.max_instances {
+            self.stats.over_max_instances += 1;
+            return;
+        }
+        self.kept.insert(at, c);
+        if self.kept.len() > limits.max_instances {
+            self.kept.pop();
+            self.stats.over_max_instances += 1;
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn limits(min_pixels: usize, max_instances: usize, num_classes: u16) -> InstanceLimits {
+        InstanceLimits { min_pixels, max_instances, num_classes }
+    }
+
+    /// Paints a rectangle [u0, u1] x [v0, v1] inclusive.
+    fn paint(plane: &mut [u8], w: usize, rect: [usize; 4], class: u8) {
+        for v in rect[1]..=rect[3] {
+            for u in rect[0]..=rect[2] {
+                plane[v * w + u] = class;
+            }
+        }
+    }
+
+    #[test]
+    fn finds_components_largest_first_with_bboxes() {
+        let (w, h) = (20, 10);
+        let mut l = vec![0u8; w * h];
+        paint(&mut l, w, [1, 1, 3, 2], 2); // 3x2 = 6
+        paint(&mut l, w, [10, 2, 17, 8], 1); // 8x7 = 56
+        paint(&mut l, w, [5, 5, 7, 8], 2); // 3x4 = 12
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::U8(&l), w, h, limits(1, 8, 0)).to_vec();
+        assert_eq!(found.len(), 3);
+        assert_eq!((found[0].class_id, found[0].pixels, found[0].bbox), (1, 56, [10, 2, 17, 8]));
+        assert_eq!((found[1].class_id, found[1].pixels, found[1].bbox), (2, 12, [5, 5, 7, 8]));
+        assert_eq!((found[2].class_id, found[2].pixels, found[2].bbox), (2, 6, [1, 1, 3, 2]));
+        // Component ids mark exactly the component's pixels.
+        let ids = f.component_ids();
+        let marked = ids.iter().filter(|&&i| i == found[0].component_id).count();
+        assert_eq!(marked, 56);
+    }
+
+    #[test]
+    fn min_pixels_and_max_instances_are_applied_and_counted() {
+        let (w, h) = (30, 10);
+        let mut l = vec![0u8; w * h];
+        paint(&mut l, w, [0, 0, 1, 1], 1); // 4 px
+        paint(&mut l, w, [5, 0, 8, 3], 1); // 16 px
+        paint(&mut l, w, [10, 0, 14, 4], 1); // 25 px
+        paint(&mut l, w, [20, 0, 25, 5], 1); // 36 px
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::U8(&l), w, h, limits(10, 2, 0)).to_vec();
+        assert_eq!(found.iter().map(|c| c.pixels).collect::<Vec<_>>(), vec![36, 25]);
+        let s = f.stats();
+        assert_eq!(s.small_components, 1);
+        assert_eq!(s.over_max_instances, 1);
+    }
+
+    #[test]
+    fn connectivity_is_four_neighbour_and_per_class() {
+        let (w, h) = (6, 6);
+        let mut l = vec![0u8; w * h];
+        // Diagonal touch: two components.
+        l[0] = 1;
+        l[w + 1] = 1;
+        // Adjacent pixels of different classes: two components.
+        l[4] = 1;
+        l[5] = 2;
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::U8(&l), w, h, limits(1, 10, 0));
+        assert_eq!(found.len(), 4);
+        assert!(found.iter().all(|c| c.pixels == 1));
+    }
+
+    #[test]
+    fn unknown_class_ids_are_skipped_and_counted() {
+        let (w, h) = (10, 4);
+        let mut l = vec![0u16; w * h];
+        for p in &mut l[0..5] {
+            *p = 3;
+        }
+        for p in &mut l[20..27] {
+            *p = 9;
+        }
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::U16(&l), w, h, limits(1, 10, 3)).to_vec();
+        assert_eq!(found.len(), 1);
+        assert_eq!(found[0].class_id, 3);
+        assert_eq!(f.stats().unknown_class_pixels, 7);
+        assert_eq!(f.stats().max_unknown_class, 9);
+    }
+
+    #[test]
+    fn reuse_on_a_new_frame_forgets_the_old_one() {
+        let (w, h) = (8, 8);
+        let mut a = vec![0u8; w * h];
+        paint(&mut a, w, [0, 0, 3, 3], 1);
+        let b = vec![0u8; w * h];
+        let mut f = InstanceFinder::new();
+        assert_eq!(f.find(&LabelPlane::U8(&a), w, h, limits(1, 4, 0)).len(), 1);
+        assert_eq!(f.find(&LabelPlane::U8(&b), w, h, limits(1, 4, 0)).len(), 0);
+        assert!(f.component_ids().iter().all(|&i| i == 0));
+    }
+}

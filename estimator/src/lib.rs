@@ -1,0 +1,50 @@
+//! # fusepose-estimator — pure compute from one RGB-D frame to object poses
+//!
+//! Frame validation, instances from a label plane, per-instance point
+//! sampling and colour crops in a preallocated [`Workspace`], the ICP
+//! baseline, and the fusion-network and segmenter inference engines.
+//!
+//! This crate touches memory only: no IPC, no files except reading weight
+//! files on request, no global state. After a warm-up frame, estimating a
+//! frame performs no heap allocation. Depends on `fusepose-scene` for object
+//! models and intrinsics; never on the daemon, client or trainer.
+
+pub mod frame;
+pub mod icp;
+pub mod instances;
+pub mod net;
+pub mod poses;
+pub mod sampling;
+pub mod seg;
+pub mod workspace;
+
+pub use icp::{IcpConfig, IcpEstimator};
+pub use frame::{ColorFormat, DepthPlane, FrameError, FrameView, LabelPlane};
+pub use poses::{ObjectPose, PoseSet};
+pub use workspace::{Instance, PrepareStats, Workspace, WorkspaceConfig, WorkspaceConfigError};
+
+/// Everything that turns a validated frame (with instances already in the
+/// workspace) into poses. Implemented by the ICP baseline and the fusion network.
+pub trait Estimator: Send {
+    /// Short name for logs and tables (`icp`, `net`).
+    fn name(&self) -> &str;
+
+    /// Estimates one pose per instance prepared in `ws` (by
+    /// [`Workspace::prepare`]) and writes them into `out` (cleared first).
+    /// Must not allocate after the first call with the same workspace sizes.
+    fn estimate(&mut self, frame: &FrameView<'_>, ws: &mut Workspace, out: &mut PoseSet) -> Result<(), EstimateError>;
+
+    /// Caps the iterations (refiner steps for the network) of the next
+    /// [`Estimator::estimate`] call only, e.g. when the daemon is behind its
+    /// deadline. Estimators without iterations to trade ignore it.
+    fn cap_next_frame(&mut self, _max_iterations: usize) {}
+}
+
+/// Why an estimator could not produce poses for a frame.
+#[derive(Debug, thiserror::Error)]
+pub enum EstimateError {
+    #[error("invalid frame: {0}")]
+    Frame(#[from] FrameError),
+    #[error("class id {0} is not in the estimator's object set")]
+    UnknownClass(u16),
+}

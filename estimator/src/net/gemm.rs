@@ -1,0 +1,365 @@
+//! Dense layers and 3x3 convolutions on preallocated buffers, with an
+//! allocation-free GEMM.
+//!
+//! `out = act(x · W + b)`: the bias is written into `out` first, the GEMM
+//! accumulates onto it, then ReLU runs over the same cache-hot rows.
+//! The GEMM (`C += A · B`, all row-major with unit column stride) uses an
+//! AVX2/FMA register-blocked kernel (6 rows × 16 columns, B streamed from
+//! L1 without packing) when the CPU has it, a scalar loop otherwise; it never
+//! allocates (matrixmultiply allocates a packing buffer per call, which the
+//! per-frame no-allocation rule forbids). Convolutions use im2col into a
+//! caller-provided buffer, then one GEMM.
+
+use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2, Axis};
+
+/// Whether the AVX2/FMA kernel can run on this CPU (checked once per call site; cheap).
+#[inline]
+fn simd_ok() -> bool {
+    #[cfg(target_arch = "x86_64")]
+    {
+        std::arch::is_x86_feature_detected!("avx2") && std::arch::is_x86_feature_detected!("fma")
+    }
+    #[cfg(not(target_arch = "x86_64"))]
+    {
+        false
+    }
+}
+
+/// `C[m,n] += A[m,k] · B[k,n]` on views with unit column stride (falls back to
+/// an index loop for any other layout).
+pub fn gemm_acc(a: ArrayView2<f32>, b: ArrayView2<f32>, c: &mut ArrayViewMut2<f32>) {
+    let (m, k) = a.dim();
+    let (k2, n) = b.dim();
+    assert_eq!(k, k2, "gemm inner dimensions");
+    assert_eq!(c.dim(), (m, n), "gemm output shape");
+    if m == 0 || n == 0 || k == 0 {
+        return;
+    }
+    let unit = |s: &[isize]| s[1] == 1 && s[0] >= 0;
+    if !(unit(a.strides()) && unit(b.strides()) && unit(c.strides())) {
+        for i in 0..m {
+            for p in 0..k {
+                let av = a[[i, p]];
+                for j in 0..n {
+                    c[[i, j]] += av * b[[p, j]];
+                }
+            }
+        }
+        return;
+    }
+    let (lda, ldb, ldc) = (
+        a.strides()[0] as usize,
+        b.strides()[0] as usize,
+        c.strides()[0] as usize,
+    );
+    let (pa, pb, pc) = (a.as_ptr(), b.as_ptr(), c.as_mut_ptr());
+    // SAFETY: the views cover rows*stride elements with unit column stride, so every
+    // (i, p), (p, j), (i, j) offset used below lies inside its view.
+    unsafe {
+        let mut j0 = 0;
+        #[cfg(target_arch = "x86_64")]
+        if simd_ok() {
+            while j0 + 16 <= n {
+                simd::panel::<2>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc);
+                j0 += 16;
+            }
+            while j0 + 8 <= n {
+                simd::panel::<1>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc);
+                j0 += 8;
+            }
+        }
+        if j0 < n {
+            for i in 0..m {
+                for p in 0..k {
+                    let av = *pa.add(i * lda + p);
+                    let brow = pb.add(p * ldb);
+                    let crow = pc.add(i * ldc);
+                    for j in j0..n {
+                        *crow.add(j) += av * *brow.add(j);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(target_arch = "x86_64")]
+mod simd {
+    use std::arch::x86_64::*;
+
+    /// Rows of the inner dimension per block, so a 16-column block of B
+    /// (256 × 16 × 4 B = 16 KB) stays in L1 while every row tile passes over it.
+    const KC: usize = 256;
+
+    /// All rows of a `W*8`-column panel: for each K block, 6-row tiles, then the remainder.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn panel<const W: usize>(
+        m: usize,
+        k: usize,
+        a: *const f32,
+        lda: usize,
+        b: *const f32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+    ) {
+        unsafe {
+            let mut k0 = 0;
+            while k0 < k {
+                let kc = KC.min(k - k0);
+                let (a, b) = (a.add(k0), b.add(k0 * ldb));
+                let mut i = 0;
+                while i + 6 <= m {
+                    tile::<6, W>(kc, a.add(i * lda), lda, b, ldb, c.add(i * ldc), ldc);
+                    i += 6;
+                }
+                let (ar, cr) = (a.add(i * lda), c.add(i * ldc));
+                match m - i {
+                    5 => tile::<5, W>(kc, ar, lda, b, ldb, cr, ldc),
+                    4 => tile::<4, W>(kc, ar, lda, b, ldb, cr, ldc),
+                    3 => tile::<3, W>(kc, ar, lda, b, ldb, cr, ldc),
+                    2 => tile::<2, W>(kc, ar, lda, b, ldb, cr, ldc),
+                    1 => tile::<1, W>(kc, ar, lda, b, ldb, cr, ldc),
+                    _ => {}
+                }
+                k0 += kc;
+            }
+        }
+    }
+
+    /// `C[R, W*8] += A[R, k] · B[k, W*8]`, accumulators in registers.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn tile<const R: usize, const W: usize>(
+        k: usize,
+        a: *const f32,
+        lda: usize,
+        b: *const f32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+    ) {
+        unsafe {
+            let mut acc = [[_mm256_setzero_ps(); W]; R];
+            for p in 0..k {
+                let brow = b.add(p * ldb);
+                let mut bv = [_mm256_setzero_ps(); W];
+                for (w, v) in bv.iter_mut().enumerate() {
+                    *v = _mm256_loadu_ps(brow.add(8 * w));
+                }
+                for (r, accr) in acc.iter_mut().enumerate() {
+                    let av = _mm256_broadcast_ss(&*a.add(r * lda + p));
+                    for w in 0..W {
+                        accr[w] = _mm256_fmadd_ps(av, bv[w], accr[w]);
+                    }
+                }
+            }
+            for (r, accr) in acc.iter().enumerate() {
+                let crow = c.add(r * ldc);
+                for (w, v) in accr.iter().enumerate() {
+                    let p = crow.add(8 * w);
+                    _mm256_storeu_ps(p, _mm256_add_ps(_mm256_loadu_ps(p), *v));
+                }
+            }
+        }
+    }
+}
+
+/// `out[r, :] = relu?(x[r, :] · w + b)` for every row r. Shapes: x `[R, I]`, w `[I, O]`, out `[R, O]`.
+pub fn dense(
+    x: ArrayView2<f32>,
+    w: ArrayView2<f32>,
+    b: Option<ArrayView1<f32>>,
+    relu: bool,
+    mut out: ArrayViewMut2<f32>,
+) {
+    match b {
+        Some(b) => out.rows_mut().into_iter().for_each(|mut r| r.assign(&b)),
+        None => out.fill(0.0),
+    }
+    gemm_acc(x, w, &mut out);
+    if relu {
+        out.mapv_inplace(|v| v.max(0.0));
+    }
+}
+
+/// A 3x3 convolution with padding 1 and the given stride, channel-major.
+///
+/// `input`: `[C_in, H, W]` flattened; `w`: `[C_out, C_in*9]` (PyTorch `[O, I, 3, 3]` flattened);
+/// `cols`: scratch of at least `C_in*9*Ho*Wo`; `out`: `[C_out, Ho*Wo]`. Bias and ReLU fused.
+#[allow(clippy::too_many_arguments)]
+pub fn conv3x3(
+    input: &[f32],
+    c_in: usize,
+    h: usize,
+    w_in: usize,
+    stride: usize,
+    weight: ArrayView2<f32>,
+    bias: ArrayView1<f32>,
+    cols: &mut [f32],
+    mut out: ArrayViewMut2<f32>,
+) {
+    let ho = (h + 2 - 3) / stride + 1;
+    let wo = (w_in + 2 - 3) / stride + 1;
+    let hw = ho * wo;
+    let cols = &mut cols[..c_in * 9 * hw];
+    for c in 0..c_in {
+        let plane = &input[c * h * w_in..(c + 1) * h * w_in];
+        for ky in 0..3 {
+            for kx in 0..3 {
+                let row = &mut cols[((c * 9) + ky * 3 + kx) * hw..((c * 9) + ky * 3 + kx + 1) * hw];
+                for oy in 0..ho {
+                    let iy = (oy * stride + ky) as isize - 1;
+                    let dst = &mut row[oy * wo..(oy + 1) * wo];
+                    if iy < 0 || iy >= h as isize {
+                        dst.fill(0.0);
+                        continue;
+                    }
+                    let src = &plane[iy as usize * w_in..(iy as usize + 1) * w_in];
+                    for (ox, d) in dst.iter_mut().enumerate() {
+                        let ix = (ox * stride + kx) as isize - 1;
+                        *d = if ix < 0 || ix >= w_in as isize {
+                            0.0
+                        } else {
+                            src[ix as usize]
+                        };
+                    }
+                }
+            }
+        }
+    }
+    let cols = ArrayView2::from_shape((c_in * 9, hw), cols).expect("cols shape");
+    for (mut r, &bv) in out.axis_iter_mut(Axis(0)).zip(bias.iter()) {
+        r.fill(bv);
+    }
+    gemm_acc(weight, cols, &mut out);
+    out.mapv_inplace(|v| v.max(0.0));
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use ndarray::{Array1, Array2, s};
+
+    #[test]
+    fn dense_adds_bias_and_clamps() {
+        let x = Array2::from_shape_vec((2, 2), vec![1.0, 2.0, -1.0, 0.0]).unwrap();
+        let w = Array2::from_shape_vec((2, 1), vec![1.0, 1.0]).unwrap();
+        let b = Array1::from_vec(vec![0.5]);
+        let mut out = Array2::zeros((2, 1));
+        dense(x.view(), w.view(), Some(b.view()), true, out.view_mut());
+        assert_eq!(out.as_slice().unwrap(), &[3.5, 0.0]);
+    }
+
+    #[test]
+    fn gemm_matches_naive_for_odd_shapes_and_strided_views() {
+        for &(m, k, n) in &[
+            (1, 1, 1),
+            (7, 5, 3),
+            (13, 27, 40),
+            (6, 64, 16),
+            (257, 33, 25),
+            (5, 9, 8),
+        ] {
+            let a = Array2::from_shape_fn((m, k + 3), |(i, j)| {
+                ((i * 31 + j * 7) % 13) as f32 * 0.1 - 0.6
+            });
+            let b = Array2::from_shape_fn((k, n + 2), |(i, j)| {
+                ((i * 11 + j * 5) % 17) as f32 * 0.05 - 0.4
+            });
+            let av = a.slice(s![.., 1..k + 1]);
+            let bv = b.slice(s![.., 2..]);
+            let mut c = Array2::from_elem((m, n + 4), 1.0f32);
+            let mut cv = c.slice_mut(s![.., 4..]);
+            gemm_acc(av, bv, &mut cv);
+            let expect = av.dot(&bv);
+            for i in 0..m {
+                for j in 0..n {
+                    assert!(
+                        (c[[i, j + 4]] - 1.0 - expect[[i, j]]).abs() < 1e-4,
+                        "{m}x{k}x{n} at {i},{j}"
+                    );
+                }
+                for j in 0..4 {
+                    assert_eq!(c[[i, j]], 1.0, "untouched columns");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn conv_matches_direct_sum() {
+        let (c_in, h, wd) = (2, 5, 4);
+        let input: Vec<f32> = (0..c_in * h * wd)
+            .map(|i| ((i * 7) % 11) as f32 - 5.0)
+            .collect();
+        let weight = Array2::from_shape_fn((3, c_in * 9), |(o, k)| {
+            ((o * 13 + k * 5) % 7) as f32 * 0.1 - 0.3
+        });
+        let bias = Array1::from_vec(vec![0.1, -0.2, 0.3]);
+        for stride in [1usize, 2] {
+            let ho = (h - 1) / stride + 1;
+            let wo = (wd - 1) / stride + 1;
+            let mut cols = vec![0.0; c_in * 9 * ho * wo];
+            let mut out = Array2::zeros((3, ho * wo));
+            conv3x3(
+                &input,
+                c_in,
+                h,
+                wd,
+                stride,
+                weight.view(),
+                bias.view(),
+                &mut cols,
+                out.view_mut(),
+            );
+            for o in 0..3 {
+                for oy in 0..ho {
+                    for ox in 0..wo {
+                        let mut s = bias[o];
+                        for c in 0..c_in {
+                            for ky in 0..3 {
+                                for kx in 0..3 {
+                                    let iy = (oy * stride + ky) as isize - 1;
+                                    let ix = (ox * stride + kx) as isize - 1;
+                                    if iy >= 0 && ix >= 0 && (iy as usize) < h && (ix as usize) < wd
+                                    {
+                                        s += weight[[o, c * 9 + ky * 3 + kx]]
+                                            * input[c * h * wd + iy as usize * wd + ix as usize];
+                                    }
+                                }
+                            }
+                        }
+                        assert!((out[[o, oy * wo + ox]] - s.max(0.0)).abs() < 1e-4);
+                    }
+                }
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod speed {
+    use super::*;
+    use ndarray::Array2;
+
+    /// `cargo test --release -p fusepose-estimator gemm_speed -- --ignored --nocapture`
+    #[test]
+    #[ignore]
+    fn gemm_speed() {
+        for &(m, k, n) in &[(256, 256, 512), (256, 384, 256), (32, 864, 1024), (256, 3, 64)] {
+            let a = Array2::from_shape_fn((m, k), |(i, j)| ((i + j) % 7) as f32 * 0.1);
+            let b = Array2::from_shape_fn((k, n), |(i, j)| ((i * j) % 5) as f32 * 0.1);
+            let mut c = Array2::zeros((m, n));
+            let reps = 200;
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                gemm_acc(a.view(), b.view(), &mut c.view_mut());
+            }
+            let s = t.elapsed().as_secs_f64() / reps as f64;
+            println!("{m}x{k}x{n}: {:.3} ms, {:.1} GFLOP/s", s * 1e3, 2.0 * (m * k * n) as f64 / s / 1e9);
+        }
+    }
+}

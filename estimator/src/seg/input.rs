@@ -1,0 +1,234 @@
+//! Between a frame and the segmenter's grids: the network input (box-filtered
+//! RGB normalised like the pose net's crops, plus mean valid depth in metres,
+//! 0 where a box has none), the nearest upsampling of the per-cell labels back
+//! to the frame, and the training target (the frame label at each cell's centre).
+//!
+//! A [`FrameMap`] holds the index tables for one frame size and one config; it
+//! allocates only when built, so per-frame use is allocation-free.
+
+use crate::frame::{ColorFormat, FrameView};
+use crate::sampling::normalise_channel;
+
+use super::config::{INPUT_CHANNELS, SegConfig};
+
+/// `[start, end)` of each of `n` boxes tiling `len` pixels (each at least one pixel).
+fn boxes(len: usize, n: usize) -> Vec<(usize, usize)> {
+    (0..n)
+        .map(|i| {
+            let start = (i * len / n).min(len - 1);
+            let end = ((i + 1) * len / n).max(start + 1).min(len);
+            (start, end)
+        })
+        .collect()
+}
+
+/// Index tables between a `width` x `height` frame and a config's input and output grids.
+#[derive(Clone, Debug)]
+pub struct FrameMap {
+    width: usize,
+    height: usize,
+    in_w: usize,
+    in_h: usize,
+    out_w: usize,
+    out_h: usize,
+    /// Input-grid boxes along x and y.
+    in_x: Vec<(usize, usize)>,
+    in_y: Vec<(usize, usize)>,
+    /// Output cell of each frame column / row (nearest upsampling).
+    up_x: Vec<u32>,
+    up_y: Vec<u32>,
+    /// Frame column / row sampled for each output cell's training target.
+    centre_x: Vec<u32>,
+    centre_y: Vec<u32>,
+}
+
+impl FrameMap {
+    /// Tables for frames of `width` x `height` (both >= 1).
+    pub fn new(width: usize, height: usize, cfg: &SegConfig) -> Self {
+        let (width, height) = (width.max(1), height.max(1));
+        let (out_h, out_w) = cfg.output_size();
+        let up = |len: usize, n: usize| -> Vec<u32> { (0..len).map(|u| (u * n / len) as u32).collect() };
+        let up_x = up(width, out_w);
+        let up_y = up(height, out_h);
+        // The centre of the frame pixels that upsample to each cell (its box if none do).
+        let centre = |map: &[u32], n: usize, len: usize| -> Vec<u32> {
+            (0..n)
+                .map(|c| {
+                    let lo = map.partition_point(|&m| (m as usize) < c);
+                    let hi = map.partition_point(|&m| (m as usize) <= c);
+                    if hi > lo { ((lo + hi - 1) / 2) as u32 } else { (c * len / n).min(len - 1) as u32 }
+                })
+                .collect()
+        };
+        let centre_x = centre(&up_x, out_w, width);
+        let centre_y = centre(&up_y, out_h, height);
+        Self {
+            width,
+            height,
+            in_w: cfg.input_width,
+            in_h: cfg.input_height,
+            out_w,
+            out_h,
+            in_x: boxes(width, cfg.input_width),
+            in_y: boxes(height, cfg.input_height),
+            up_x,
+            up_y,
+            centre_x,
+            centre_y,
+        }
+    }
+
+    /// Whether the tables fit this frame size and config.
+    pub fn fits(&self, width: usize, height: usize, cfg: &SegConfig) -> bool {
+        let (oh, ow) = cfg.output_size();
+        self.width == width
+            && self.height == height
+            && self.in_w == cfg.input_width
+            && self.in_h == cfg.input_height
+            && self.out_w == ow
+            && self.out_h == oh
+    }
+
+    /// Length of the network input, `4 * input_height * input_width`.
+    pub fn input_len(&self) -> usize {
+        INPUT_CHANNELS * self.in_w * self.in_h
+    }
+
+    /// Number of output cells, `out_height * out_width`.
+    pub fn cells(&self) -> usize {
+        self.out_w * self.out_h
+    }
+
+    /// Writes the network input `[4, in_h, in_w]` (channel-major) for `frame`,
+    /// which must be valid and of this map's size (checked by the caller).
+    pub fn fill_input(&self, frame: &FrameView<'_>, out: &mut [f32]) {
+        let plane = self.in_w * self.in_h;
+        let (rc, bc) = match frame.color_format {
+            ColorFormat::Rgb8 => (0, 2),
+            ColorFormat::Bgr8 => (2, 0),
+        };
+        let w = self.width;
+        for (iy, &(y0, y1)) in self.in_y.iter().enumerate() {
+            for (ix, &(x0, x1)) in self.in_x.iter().enumerate() {
+                let mut sum = [0u32; 3];
+                let mut zsum = 0.0f32;
+                let mut zn = 0u32;
+                for v in y0..y1 {
+                    let row = v * w;
+                    for u in x0..x1 {
+                        let p = row + u;
+                        if let Some(px) = frame.color.get(3 * p..3 * p + 3) {
+                            sum[0] += px[rc] as u32;
+                            sum[1] += px[1] as u32;
+                            sum[2] += px[bc] as u32;
+                        }
+                        if let Some(z) = frame.depth.metres(p) {
+                            zsum += z;
+                            zn += 1;
+                        }
+                    }
+                }
+                let n = ((y1 - y0) * (x1 - x0)) as f32;
+                let i = iy * self.in_w + ix;
+                for c in 0..3 {
+                    out[c * plane + i] = normalise_channel(sum[c] as f32 / n, c);
+                }
+                out[3 * plane + i] = if zn > 0 { zsum / zn as f32 } else { 0.0 };
+            }
+        }
+    }
+
+    /// Nearest upsampling of per-cell labels `[out_h * out_w]` to the frame (`labels_out`: width * height).
+    pub fn upsample(&self, cells: &[u16], labels_out: &mut [u16]) {
+        for (v, row) in labels_out.chunks_exact_mut(self.width).enumerate().take(self.height) {
+            let crow = &cells[self.up_y[v] as usize * self.out_w..][..self.out_w];
+            for (l, &cx) in row.iter_mut().zip(&self.up_x) {
+                *l = crow[cx as usize];
+            }
+        }
+    }
+
+    /// The training target: the frame label (`label_at(pixel index)`) at each
+    /// output cell's centre pixel, into `out` (`out_h * out_w`).
+    pub fn target(&self, label_at: impl Fn(usize) -> u16, out: &mut [u16]) {
+        for (cy, &v) in self.centre_y.iter().enumerate() {
+            for (cx, &u) in self.centre_x.iter().enumerate() {
+                out[cy * self.out_w + cx] = label_at(v as usize * self.width + u as usize);
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::{DepthPlane, LabelPlane};
+    use fusepose_scene::Intrinsics;
+
+    fn k(w: u32, h: u32) -> Intrinsics {
+        Intrinsics { fx: 500.0, fy: 500.0, cx: w as f64 / 2.0, cy: h as f64 / 2.0, width: w, height: h }
+    }
+
+    #[test]
+    fn boxes_tile_the_frame() {
+        for (len, n) in [(640, 160), (641, 160), (100, 160), (480, 120)] {
+            let b = boxes(len, n);
+            assert_eq!(b.len(), n);
+            assert!(b.iter().all(|&(s, e)| s < e && e <= len));
+            if len >= n {
+                assert_eq!(b[0].0, 0);
+                assert_eq!(b[n - 1].1, len);
+                assert!(b.windows(2).all(|w| w[0].1 == w[1].0));
+            }
+        }
+    }
+
+    #[test]
+    fn input_averages_boxes_and_ignores_missing_depth() {
+        let cfg = SegConfig::new(2);
+        let (w, h) = (640usize, 480usize);
+        let mut color = vec![0u8; w * h * 3];
+        let mut depth = vec![0u16; w * h];
+        // Input cell (0, 0) covers pixels 0..4 x 0..4: red 100, half the depth valid at 1 m and 2 m.
+        for v in 0..4 {
+            for u in 0..4 {
+                let p = v * w + u;
+                color[3 * p] = 100;
+                color[3 * p + 2] = 7;
+                depth[p] = if u < 2 { 10_000 } else if v < 2 { 20_000 } else { 0 };
+            }
+        }
+        let frame = FrameView {
+            intrinsics: k(w as u32, h as u32),
+            color_format: ColorFormat::Bgr8,
+            color: &color,
+            depth: DepthPlane::U16 { data: &depth, scale: 1e-4 },
+            labels: None,
+        };
+        let map = FrameMap::new(w, h, &cfg);
+        let mut input = vec![f32::NAN; map.input_len()];
+        map.fill_input(&frame, &mut input);
+        let plane = 160 * 120;
+        // Bgr8: byte 0 is blue.
+        assert!((input[2 * plane] - normalise_channel(100.0, 2)).abs() < 1e-6);
+        assert!((input[0] - normalise_channel(7.0, 0)).abs() < 1e-6);
+        assert!((input[3 * plane] - (4.0 * 1.0 + 2.0 * 2.0) / 6.0).abs() < 1e-6);
+        assert_eq!(input[3 * plane + 1], 0.0);
+        assert!(input.iter().all(|v| v.is_finite()));
+    }
+
+    #[test]
+    fn upsample_and_target_are_consistent() {
+        let cfg = SegConfig::new(3);
+        let (w, h) = (333usize, 250usize);
+        let map = FrameMap::new(w, h, &cfg);
+        let cells: Vec<u16> = (0..map.cells()).map(|i| (i % 4) as u16).collect();
+        let mut full = vec![0u16; w * h];
+        map.upsample(&cells, &mut full);
+        // Sampling the upsampled plane at the cell centres gives the cells back.
+        let plane = LabelPlane::U16(&full);
+        let mut back = vec![9u16; map.cells()];
+        map.target(|i| plane.class_at(i), &mut back);
+        assert_eq!(back, cells);
+    }
+}

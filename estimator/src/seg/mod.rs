@@ -1,0 +1,19 @@
+//! The built-in instance segmenter: a compact encoder–decoder over the whole
+//! frame at reduced resolution (RGB + depth in, per-cell scores for the
+//! objects and background out), whose argmax label plane feeds
+//! [`crate::Workspace::prepare`] through [`crate::FrameView::labels`].
+//!
+//! Layout: [`config`] (architecture, tensor shapes, cost), [`file`] (weight
+//! file reading and object-set checks), [`input`] (frame ↔ grid tables:
+//! network input, upsampling, training targets), [`engine`] (the forward pass
+//! on preallocated buffers). The trainer is `fusepose_train::seg`.
+
+pub mod config;
+pub mod engine;
+pub mod file;
+pub mod input;
+
+pub use config::SegConfig;
+pub use engine::{SegEngine, SegError};
+pub use file::SegFile;
+pub use input::FrameMap;

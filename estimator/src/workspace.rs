@@ -1,0 +1,437 @@
+//! Preallocated per-frame buffers: instances, sampled points, colour crops.
+//!
+//! [`Workspace::prepare`] runs frame validation → instances (connected
+//! components of the label plane, see [`crate::instances`]) → per instance:
+//! N sampled valid-depth pixels back-projected to points, an S×S normalised
+//! colour crop, and each point's crop cell (see [`crate::sampling`]).
+//!
+//! Allocation: the arrays are allocated in [`Workspace::new`]; the per-pixel
+//! buffers (component ids, flood-fill stack, candidate pixels) are sized on
+//! the first frame and grow only when a later frame has more pixels. Frames of
+//! a fixed size never allocate after the first.
+
+use ndarray::{Array2, Array3, Array4};
+use rand::SeedableRng;
+use rand_pcg::Pcg64Mcg;
+
+use crate::frame::{FrameError, FrameView, LabelPlane};
+use crate::instances::{Component, InstanceFinder, InstanceLimits, LabelStats};
+use crate::sampling;
+
+/// Sizes fixed at start-up; buffers are allocated once from them.
+///
+/// Construct with `..WorkspaceConfig::default()` so added fields keep compiling.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct WorkspaceConfig {
+    /// Most instances kept per frame (largest first).
+    pub max_instances: usize,
+    /// Points sampled per instance (N).
+    pub num_points: usize,
+    /// Side of the square colour crop (S).
+    pub crop_size: usize,
+    /// Smallest connected component kept, in pixels.
+    pub min_pixels: usize,
+    /// Largest valid class id (the object set's size); label pixels with a
+    /// larger id are skipped and counted in [`PrepareStats`]. 0 accepts any id.
+    pub num_classes: u16,
+    /// Crop margin: the crop side is max(bbox w, h) · (1 + margin).
+    pub crop_margin: f32,
+    /// Instances with fewer valid-depth pixels than this are dropped (counted).
+    pub min_valid_depth: usize,
+}
+
+impl Default for WorkspaceConfig {
+    fn default() -> Self {
+        Self {
+            max_instances: 8,
+            num_points: 500,
+            crop_size: 64,
+            min_pixels: 50,
+            num_classes: 0,
+            crop_margin: 0.15,
+            min_valid_depth: 10,
+        }
+    }
+}
+
+/// Why a [`WorkspaceConfig`] was refused.
+#[derive(Clone, Debug, PartialEq, thiserror::Error)]
+pub enum WorkspaceConfigError {
+    #[error("max_instances must be in 1..=65535, got {0}")]
+    MaxInstances(usize),
+    #[error("num_points must be in 1..=1048576, got {0}")]
+    NumPoints(usize),
+    #[error("crop_size must be in 1..=1024, got {0}")]
+    CropSize(usize),
+    #[error("crop_margin must be finite and >= 0, got {0}")]
+    CropMargin(f32),
+}
+
+/// One instance found in the label plane.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Instance {
+    pub class_id: u16,
+    /// Pixels in the connected component.
+    pub pixels: u32,
+    /// Pixels of the component with valid depth. When fewer than N, the
+    /// sampled points repeat (wrap padding) and only the first
+    /// `valid_depth_pixels` rows of the instance's points are distinct.
+    pub valid_depth_pixels: u32,
+    /// [u_min, v_min, u_max, v_max] inclusive.
+    pub bbox: [u16; 4],
+    /// Crop window in the frame: [u0, v0, side] (square, clamped to the image).
+    pub crop_window: [u32; 3],
+}
+
+impl Instance {
+    /// Distinct points among the instance's N sampled points.
+    pub fn distinct_points(&self, num_points: usize) -> usize {
+        (self.valid_depth_pixels as usize).min(num_points)
+    }
+}
+
+/// What [`Workspace::prepare`] skipped in the last frame (for the daemon's counters).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct PrepareStats {
+    /// Unknown class ids, small components, components beyond `max_instances`.
+    pub labels: LabelStats,
+    /// Instances dropped for having fewer than `min_valid_depth` valid-depth pixels.
+    pub low_depth_instances: u32,
+}
+
+/// All per-frame buffers. Instance `i` owns row `i` of each array; rows at and
+/// beyond `instances.len()` are zero.
+pub struct Workspace {
+    pub config: WorkspaceConfig,
+    /// Instances of the current frame, `len() <= max_instances`, largest first.
+    pub instances: Vec<Instance>,
+    /// [max_instances, N, 3]: back-projected points, camera frame, metres.
+    pub points: Array3<f32>,
+    /// [max_instances, 3, S, S]: RGB crops, normalised per channel (ImageNet mean/std).
+    pub crops: Array4<f32>,
+    /// [max_instances, N]: index (row * S + col) in the crop of each point's pixel.
+    pub choose: Array2<u32>,
+    finder: InstanceFinder,
+    /// Valid-depth pixel indices of the instance being prepared.
+    candidates: Vec<u32>,
+    /// Sampled pixel indices of the instance being prepared.
+    picked: Vec<u32>,
+    stats: PrepareStats,
+}
+
+impl Workspace {
+    /// Allocates every buffer for `config`.
+    pub fn new(config: WorkspaceConfig) -> Result<Self, WorkspaceConfigError> {
+        if config.max_instances == 0 || config.max_instances > u16::MAX as usize {
+            return Err(WorkspaceConfigError::MaxInstances(config.max_instances));
+        }
+        if config.num_points == 0 || config.num_points > 1 << 20 {
+            return Err(WorkspaceConfigError::NumPoints(config.num_points));
+        }
+        if config.crop_size == 0 || config.crop_size > 1024 {
+            return Err(WorkspaceConfigError::CropSize(config.crop_size));
+        }
+        if !(config.crop_margin.is_finite() && config.crop_margin >= 0.0) {
+            return Err(WorkspaceConfigError::CropMargin(config.crop_margin));
+        }
+        let (m, n, s) = (config.max_instances, config.num_points, config.crop_size);
+        Ok(Self {
+            config,
+            instances: Vec::with_capacity(m),
+            points: Array3::zeros((m, n, 3)),
+            crops: Array4::zeros((m, 3, s, s)),
+            choose: Array2::zeros((m, n)),
+            finder: InstanceFinder::with_capacity(0, m),
+            candidates: Vec::new(),
+            picked: vec![0; n],
+            stats: PrepareStats::default(),
+        })
+    }
+
+    /// Validates `frame`, finds its instances in the label plane and fills
+    /// `points`, `crops` and `choose` for each; returns the instance count.
+    ///
+    /// `frame_seed` seeds the point sampling (same frame + seed → same
+    /// points). Instances with fewer than `min_valid_depth` valid-depth pixels
+    /// are dropped and counted in [`Workspace::stats`]. On error the
+    /// workspace holds no instances.
+    pub fn prepare(&mut self, frame: &FrameView<'_>, frame_seed: u64) -> Result<usize, FrameError> {
+        self.instances.clear();
+        self.stats = PrepareStats::default();
+        frame.validate()?;
+        let labels: LabelPlane<'_> = frame.labels.ok_or(FrameError::MissingLabels)?;
+        let (w, h) = (frame.width(), frame.height());
+        let limits = InstanceLimits {
+            min_pixels: self.config.min_pixels.max(1),
+            max_instances: self.config.max_instances,
+            num_classes: self.config.num_classes,
+        };
+        self.finder.find(&labels, w, h, limits);
+        self.stats.labels = self.finder.stats();
+        if self.candidates.capacity() < w * h {
+            self.candidates.reserve(w * h - self.candidates.len());
+        }
+        let mut rng = Pcg64Mcg::seed_from_u64(frame_seed);
+        for k in 0..self.finder.components().len() {
+            let component = self.finder.components()[k];
+            self.prepare_instance(frame, component, &mut rng);
+        }
+        self.zero_unused_rows();
+        Ok(self.instances.len())
+    }
+
+    /// What the last [`prepare`](Self::prepare) skipped.
+    pub fn stats(&self) -> PrepareStats {
+        self.stats
+    }
+
+    /// Per-pixel component ids of the last frame (row-major; 0 = none). A
+    /// pixel belongs to instance `i` when it lies in `instances[i].bbox` and
+    /// its id equals [`Workspace::component_id`]`(i)`.
+    pub fn component_ids(&self) -> &[u32] {
+        self.finder.component_ids()
+    }
+
+    /// Component id of instance `i` in [`Workspace::component_ids`].
+    pub fn component_id(&self, i: usize) -> Option<u32> {
+        let inst = self.instances.get(i)?;
+        self.finder
+            .components()
+            .iter()
+            .find(|c| c.bbox == inst.bbox && c.class_id == inst.class_id && c.pixels == inst.pixels)
+            .map(|c| c.component_id)
+    }
+
+    /// Points of instance `i`: N rows of [x, y, z] metres, camera frame.
+    pub fn instance_points(&self, i: usize) -> &[[f32; 3]] {
+        let n = self.config.num_points;
+        match self.points.as_slice() {
+            Some(all) if i < self.config.max_instances => as_xyz(&all[i * n * 3..(i + 1) * n * 3]),
+            _ => &[],
+        }
+    }
+
+    fn prepare_instance(&mut self, frame: &FrameView<'_>, component: Component, rng: &mut Pcg64Mcg) {
+        let w = frame.width();
+        let [u_min, v_min, u_max, v_max] = component.bbox.map(|x| x as usize);
+        self.candidates.clear();
+        let ids = self.finder.component_ids();
+        for v in v_min..=v_max {
+            for u in u_min..=u_max {
+                let p = v * w + u;
+                if ids[p] == component.component_id && frame.depth.metres(p).is_some() {
+                    self.candidates.push(p as u32);
+                }
+            }
+        }
+        let valid = self.candidates.len();
+        if valid < self.config.min_valid_depth.max(1) {
+            self.stats.low_depth_instances += 1;
+            return;
+        }
+        let k = self.instances.len();
+        let (n, s) = (self.config.num_points, self.config.crop_size);
+        sampling::sample_pixels(&mut self.candidates, &mut self.picked, rng);
+        let window = sampling::crop_window(component.bbox, self.config.crop_margin, w, frame.height());
+        // The arrays are created in standard layout by `new`; a caller that
+        // swapped in a non-contiguous array gets no instance rather than a panic.
+        let (Some(points), Some(choose), Some(crops)) =
+            (self.points.as_slice_mut(), self.choose.as_slice_mut(), self.crops.as_slice_mut())
+        else {
+            return;
+        };
+        let points = &mut points[k * n * 3..(k + 1) * n * 3];
+        let choose = &mut choose[k * n..(k + 1) * n];
+        for (i, &p) in self.picked.iter().enumerate() {
+            let p = p as usize;
+            let (u, v) = (p % w, p / w);
+            let z = frame.depth.metres(p).unwrap_or(0.0);
+            points[i * 3..i * 3 + 3].copy_from_slice(&sampling::back_project(frame, u, v, z));
+            choose[i] = sampling::crop_cell(u, v, window, s);
+        }
+        sampling::resample_crop(frame, window, s, &mut crops[k * 3 * s * s..(k + 1) * 3 * s * s]);
+        self.instances.push(Instance {
+            class_id: component.class_id,
+            pixels: component.pixels,
+            valid_depth_pixels: valid as u32,
+            bbox: component.bbox,
+            crop_window: window,
+        });
+    }
+
+    fn zero_unused_rows(&mut self) {
+        let k = self.instances.len();
+        let (n, s) = (self.config.num_points, self.config.crop_size);
+        if let Some(p) = self.points.as_slice_mut() {
+            p[k * n * 3..].fill(0.0);
+        }
+        if let Some(c) = self.choose.as_slice_mut() {
+            c[k * n..].fill(0);
+        }
+        if let Some(c) = self.crops.as_slice_mut() {
+            c[k * 3 * s * s..].fill(0.0);
+        }
+    }
+}
+
+/// Views a flat xyz slice (length a multiple of 3) as points.
+fn as_xyz(flat: &[f32]) -> &[[f32; 3]] {
+    let (chunks, _) = flat.as_chunks::<3>();
+    chunks
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::frame::{ColorFormat, DepthPlane};
+    use fusepose_scene::Intrinsics;
+
+    const W: usize = 64;
+    const H: usize = 48;
+
+    struct Scene {
+        color: Vec<u8>,
+        depth: Vec<u16>,
+        labels: Vec<u8>,
+    }
+
+    fn intrinsics() -> Intrinsics {
+        Intrinsics { fx: 60.0, fy: 60.0, cx: 32.0, cy: 24.0, width: W as u32, height: H as u32 }
+    }
+
+    /// Class 1: 20x10 rect at (5, 5); class 2: 8x8 rect at (40, 30).
+    /// Depth 1.0 m everywhere except a hole in the class-2 rect.
+    fn scene() -> Scene {
+        let mut s = Scene { color: vec![0; W * H * 3], depth: vec![1000; W * H], labels: vec![0; W * H] };
+        for v in 0..H {
+            for u in 0..W {
+                let p = v * W + u;
+                s.color[p * 3..p * 3 + 3].copy_from_slice(&[u as u8 * 3, v as u8 * 5, 77]);
+                if (5..25).contains(&u) && (5..15).contains(&v) {
+                    s.labels[p] = 1;
+                }
+                if (40..48).contains(&u) && (30..38).contains(&v) {
+                    s.labels[p] = 2;
+                    if u >= 44 {
+                        s.depth[p] = 0;
+                    }
+                }
+            }
+        }
+        s
+    }
+
+    fn frame(s: &Scene) -> FrameView<'_> {
+        FrameView {
+            intrinsics: intrinsics(),
+            color_format: ColorFormat::Rgb8,
+            color: &s.color,
+            depth: DepthPlane::U16 { data: &s.depth, scale: 0.001 },
+            labels: Some(LabelPlane::U8(&s.labels)),
+        }
+    }
+
+    fn config() -> WorkspaceConfig {
+        WorkspaceConfig { max_instances: 4, num_points: 100, crop_size: 16, min_pixels: 20, ..Default::default() }
+    }
+
+    #[test]
+    fn prepare_fills_points_crops_and_choose_per_instance() {
+        let s = scene();
+        let mut ws = Workspace::new(config()).unwrap();
+        let n = ws.prepare(&frame(&s), 7).unwrap();
+        assert_eq!(n, 2);
+        let a = ws.instances[0];
+        assert_eq!((a.class_id, a.pixels, a.valid_depth_pixels, a.bbox), (1, 200, 200, [5, 5, 24, 14]));
+        let b = ws.instances[1];
+        assert_eq!((b.class_id, b.pixels, b.valid_depth_pixels), (2, 64, 32));
+        // Every point of instance 0 back-projects a pixel of the rect at z = 1 m.
+        for p in ws.instance_points(0) {
+            assert!((p[2] - 1.0).abs() < 1e-6);
+            let u = p[0] as f64 * 60.0 + 32.0;
+            let v = p[1] as f64 * 60.0 + 24.0;
+            assert!((5.0 - 1e-3..24.0 + 1e-3).contains(&u) && (5.0 - 1e-3..14.0 + 1e-3).contains(&v), "{u} {v}");
+        }
+        // Instance 1 has 32 valid pixels for 100 points: wrap padded.
+        let pts = ws.instance_points(1);
+        for i in 32..100 {
+            assert_eq!(pts[i], pts[i % 32]);
+            assert_eq!(ws.choose[[1, i]], ws.choose[[1, i % 32]]);
+        }
+        // Its points avoid the depth hole (u >= 44).
+        assert!(pts.iter().all(|p| p[0] as f64 * 60.0 + 32.0 < 44.0 - 1e-3));
+        // Unused rows are zero.
+        assert!(ws.points.slice(ndarray::s![2.., .., ..]).iter().all(|&x| x == 0.0));
+        assert!(ws.choose.slice(ndarray::s![2.., ..]).iter().all(|&x| x == 0));
+    }
+
+    #[test]
+    fn choose_points_at_the_crop_cell_of_each_pixel() {
+        let s = scene();
+        let mut ws = Workspace::new(config()).unwrap();
+        ws.prepare(&frame(&s), 1).unwrap();
+        let inst = ws.instances[0];
+        let [u0, v0, side] = inst.crop_window;
+        let sz = 16usize;
+        for (i, p) in ws.instance_points(0).iter().enumerate() {
+            let u = (p[0] as f64 * 60.0 + 32.0).round() as usize;
+            let v = (p[1] as f64 * 60.0 + 24.0).round() as usize;
+            let cell = ws.choose[[0, i]] as usize;
+            let (row, col) = (cell / sz, cell % sz);
+            // The cell's footprint in the frame contains the pixel centre.
+            let scale = side as f64 / sz as f64;
+            let (cu0, cv0) = (u0 as f64 - 0.5 + col as f64 * scale, v0 as f64 - 0.5 + row as f64 * scale);
+            assert!((cu0..cu0 + scale + 1e-9).contains(&(u as f64)), "u {u} col {col}");
+            assert!((cv0..cv0 + scale + 1e-9).contains(&(v as f64)), "v {v} row {row}");
+            // Red channel encodes u (3u/255): the crop value at the cell is
+            // within one bilinear step of the pixel's own colour.
+            let red = ws.crops[[0, 0, row, col]] * sampling::IMAGENET_STD[0] + sampling::IMAGENET_MEAN[0];
+            let red_u = red as f64 * 255.0 / 3.0;
+            assert!((red_u - u as f64).abs() <= scale / 2.0 + 0.01, "{red_u} vs {u}");
+        }
+    }
+
+    #[test]
+    fn same_seed_same_sample_and_errors_clear_instances() {
+        let s = scene();
+        let mut ws = Workspace::new(config()).unwrap();
+        ws.prepare(&frame(&s), 3).unwrap();
+        let first = ws.points.clone();
+        ws.prepare(&frame(&s), 3).unwrap();
+        assert_eq!(first, ws.points);
+        ws.prepare(&frame(&s), 4).unwrap();
+        assert_ne!(first, ws.points);
+        let mut f = frame(&s);
+        f.labels = None;
+        assert_eq!(ws.prepare(&f, 0), Err(FrameError::MissingLabels));
+        assert!(ws.instances.is_empty());
+        let mut f = frame(&s);
+        f.intrinsics.fx = 0.0;
+        assert!(matches!(ws.prepare(&f, 0), Err(FrameError::BadFocalLength { .. })));
+    }
+
+    #[test]
+    fn low_depth_instances_are_dropped_and_counted() {
+        let mut s = scene();
+        for v in 30..38 {
+            for u in 40..48 {
+                s.depth[v * W + u] = 0;
+            }
+        }
+        s.depth[30 * W + 40] = 900;
+        let mut ws = Workspace::new(config()).unwrap();
+        assert_eq!(ws.prepare(&frame(&s), 0).unwrap(), 1);
+        assert_eq!(ws.stats().low_depth_instances, 1);
+        assert_eq!(ws.component_id(0), Some(ws.component_ids()[5 * W + 5]));
+    }
+
+    #[test]
+    fn bad_configs_are_refused() {
+        let bad = |c: WorkspaceConfig| Workspace::new(c).err();
+        let base = config();
+        assert_eq!(bad(WorkspaceConfig { max_instances: 0, ..base }), Some(WorkspaceConfigError::MaxInstances(0)));
+        assert_eq!(bad(WorkspaceConfig { num_points: 0, ..base }), Some(WorkspaceConfigError::NumPoints(0)));
+        assert_eq!(bad(WorkspaceConfig { crop_size: 0, ..base }), Some(WorkspaceConfigError::CropSize(0)));
+        assert!(matches!(bad(WorkspaceConfig { crop_margin: f32::NAN, ..base }), Some(WorkspaceConfigError::CropMargin(_))));
+    }
+}

@@ -1,0 +1,181 @@
+//! Synthetic test scenes without the renderer: objects made of axis-aligned
+//! boxes (object frame, metres), ray-cast into depth and label planes.
+
+#![allow(dead_code)]
+
+use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane};
+use fusepose_scene::{Intrinsics, Mesh, ObjectModel, ObjectSet, Pose, Symmetry};
+use nalgebra::{Point3, Vector3};
+
+/// An object as a union of boxes `[min, max]` (object frame, metres).
+#[derive(Clone, Debug)]
+pub struct BoxObject {
+    pub name: &'static str,
+    pub boxes: Vec<([f64; 3], [f64; 3])>,
+}
+
+/// An asymmetric L-shaped block with a nub (about 8 × 7 × 4 cm).
+pub fn l_block() -> BoxObject {
+    BoxObject {
+        name: "l_block",
+        boxes: vec![
+            ([-0.04, -0.03, -0.02], [0.04, -0.01, 0.02]),
+            ([-0.04, -0.01, -0.02], [-0.02, 0.04, 0.02]),
+            ([0.02, -0.01, -0.02], [0.04, 0.01, 0.0]),
+        ],
+    }
+}
+
+/// A squat step shape (two boxes), different from the L block.
+pub fn step_block() -> BoxObject {
+    BoxObject {
+        name: "step_block",
+        boxes: vec![([-0.03, -0.02, -0.015], [0.03, 0.02, 0.0]), ([-0.03, -0.02, 0.0], [0.0, 0.02, 0.025])],
+    }
+}
+
+impl BoxObject {
+    fn inside_other(&self, p: &Vector3<f64>, skip: usize) -> bool {
+        self.boxes.iter().enumerate().any(|(i, (lo, hi))| {
+            i != skip && (0..3).all(|a| p[a] > lo[a] + 1e-9 && p[a] < hi[a] - 1e-9)
+        })
+    }
+
+    /// Surface samples on a grid of `spacing` metres over every box face,
+    /// without points buried inside another box.
+    pub fn samples(&self, spacing: f64) -> Vec<Point3<f64>> {
+        let mut out = Vec::new();
+        for (bi, (lo, hi)) in self.boxes.iter().enumerate() {
+            for axis in 0..3 {
+                let (a, b) = ((axis + 1) % 3, (axis + 2) % 3);
+                let na = ((hi[a] - lo[a]) / spacing).round().max(1.0) as usize;
+                let nb = ((hi[b] - lo[b]) / spacing).round().max(1.0) as usize;
+                for side in [lo[axis], hi[axis]] {
+                    for i in 0..na {
+                        for j in 0..nb {
+                            let mut p = Vector3::zeros();
+                            p[axis] = side;
+                            p[a] = lo[a] + (i as f64 + 0.5) * (hi[a] - lo[a]) / na as f64;
+                            p[b] = lo[b] + (j as f64 + 0.5) * (hi[b] - lo[b]) / nb as f64;
+                            // A face point is buried when just outside the face
+                            // (along its outward normal) lies inside another box.
+                            let mut probe = p;
+                            probe[axis] += if side == hi[axis] { 1e-6 } else { -1e-6 };
+                            if !self.inside_other(&probe, bi) {
+                                out.push(Point3::from(p));
+                            }
+                        }
+                    }
+                }
+            }
+        }
+        out
+    }
+
+    pub fn model(&self) -> ObjectModel {
+        let samples = self.samples(0.003);
+        let lo = self.boxes.iter().fold([f64::MAX; 3], |m, (l, _)| [m[0].min(l[0]), m[1].min(l[1]), m[2].min(l[2])]);
+        let hi = self.boxes.iter().fold([f64::MIN; 3], |m, (_, h)| [m[0].max(h[0]), m[1].max(h[1]), m[2].max(h[2])]);
+        let diameter = (Vector3::from(hi) - Vector3::from(lo)).norm();
+        ObjectModel {
+            name: self.name.into(),
+            mesh: Mesh::default(),
+            symmetry: Symmetry::None,
+            samples,
+            diameter,
+            bbox_min: Point3::from(lo),
+            bbox_max: Point3::from(hi),
+        }
+    }
+
+    /// Distance along a camera ray (origin 0, direction `d` with d.z = 1) to
+    /// the first hit, i.e. the depth z; `None` on a miss.
+    pub fn ray_depth(&self, pose: &Pose, d: &Vector3<f64>) -> Option<f64> {
+        let inv = pose.inverse();
+        let o = inv.translation.vector;
+        let dir = inv.rotation * d;
+        let mut best: Option<f64> = None;
+        for (lo, hi) in &self.boxes {
+            let (mut t0, mut t1) = (0.0f64, f64::MAX);
+            let mut hit = true;
+            for a in 0..3 {
+                if dir[a].abs() < 1e-12 {
+                    if o[a] < lo[a] || o[a] > hi[a] {
+                        hit = false;
+                        break;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((lo[a] - o[a]) / dir[a], (hi[a] - o[a]) / dir[a]);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+            if hit && t0 <= t1 && t0 > 0.0 {
+                best = Some(best.map_or(t0, |b: f64| b.min(t0)));
+            }
+        }
+        best
+    }
+}
+
+pub fn object_set(objects: &[BoxObject]) -> ObjectSet {
+    ObjectSet { objects: objects.iter().map(BoxObject::model).collect() }
+}
+
+/// An owned synthetic RGB-D frame.
+pub struct SyntheticFrame {
+    pub intrinsics: Intrinsics,
+    pub color: Vec<u8>,
+    pub depth: Vec<u16>,
+    pub labels: Vec<u8>,
+}
+
+impl SyntheticFrame {
+    pub fn view(&self) -> FrameView<'_> {
+        FrameView {
+            intrinsics: self.intrinsics,
+            color_format: ColorFormat::Rgb8,
+            color: &self.color,
+            depth: DepthPlane::U16 { data: &self.depth, scale: 0.0001 },
+            labels: Some(LabelPlane::U8(&self.labels)),
+        }
+    }
+}
+
+pub fn intrinsics() -> Intrinsics {
+    Intrinsics { fx: 300.0, fy: 300.0, cx: 160.0, cy: 120.0, width: 320, height: 240 }
+}
+
+/// Ray-casts `objects` (class id = position + 1) at their poses in front of
+/// a tilted background plane; depth in 0.1 mm units.
+pub fn render(objects: &[(u8, &BoxObject, Pose)]) -> SyntheticFrame {
+    let k = intrinsics();
+    let (w, h) = (k.width as usize, k.height as usize);
+    let mut f = SyntheticFrame { intrinsics: k, color: vec![0; w * h * 3], depth: vec![0; w * h], labels: vec![0; w * h] };
+    for v in 0..h {
+        for u in 0..w {
+            let p = v * w + u;
+            let d = Vector3::new((u as f64 - k.cx) / k.fx, (v as f64 - k.cy) / k.fy, 1.0);
+            // Background: plane z = 0.9 + 0.3 y (tilted table), beyond the objects.
+            let mut z = 0.9 / (1.0 - 0.3 * d.y);
+            let mut label = 0u8;
+            for (class, obj, pose) in objects {
+                if let Some(t) = obj.ray_depth(pose, &d)
+                    && t < z
+                {
+                    z = t;
+                    label = *class;
+                }
+            }
+            f.depth[p] = (z * 10_000.0).round() as u16;
+            f.labels[p] = label;
+            f.color[p * 3..p * 3 + 3].copy_from_slice(&[(u % 256) as u8, (v % 256) as u8, label.wrapping_mul(60)]);
+        }
+    }
+    f
+}
+
+/// Rotation angle between two rotations, degrees.
+pub fn angle_deg(a: &nalgebra::UnitQuaternion<f64>, b: &nalgebra::UnitQuaternion<f64>) -> f64 {
+    a.angle_to(b).to_degrees()
+}

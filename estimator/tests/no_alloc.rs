@@ -1,0 +1,101 @@
+//! After a warm-up frame, `Workspace::prepare` and the ICP estimator's
+//! `estimate` perform no heap allocation on further frames of the same size.
+//!
+//! A counting global allocator counts allocations made on the test's own
+//! thread while counting is switched on (other test threads don't interfere).
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+
+use common::{l_block, object_set, render, step_block};
+use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
+use fusepose_estimator::{Estimator, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_scene::Pose;
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+struct CountingAllocator;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn note_allocation() {
+    let counting = COUNTING.try_with(Cell::get).unwrap_or(false);
+    if counting {
+        let _ = ALLOCATIONS.try_with(|a| a.set(a.get() + 1));
+    }
+}
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note_allocation();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+/// Allocations made by `f` on this thread.
+fn allocations_in(f: impl FnOnce()) -> usize {
+    ALLOCATIONS.with(|a| a.set(0));
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    ALLOCATIONS.with(Cell::get)
+}
+
+fn pose(axis: [f64; 3], deg: f64, t: [f64; 3]) -> Pose {
+    let r = UnitQuaternion::from_scaled_axis(Vector3::from(axis).normalize() * deg.to_radians());
+    Pose::from_parts(Translation3::new(t[0], t[1], t[2]), r)
+}
+
+#[test]
+fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
+    // The counter itself works.
+    assert!(allocations_in(|| drop(std::hint::black_box(vec![1u8; 16]))) >= 1);
+
+    let (l, s) = (l_block(), step_block());
+    let objects = object_set(&[l.clone(), s.clone()]);
+    let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+    let mut ws = Workspace::new(WorkspaceConfig { num_classes: 2, ..Default::default() }).unwrap();
+    let mut out = PoseSet::with_capacity(8);
+
+    let warm = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [-0.05, 0.0, 0.5]))]);
+    assert_eq!(ws.prepare(&warm.view(), 0).unwrap(), 1);
+    icp.estimate(&warm.view(), &mut ws, &mut out).unwrap();
+
+    // Different frames: two objects, other poses, then one object again.
+    let frames = [
+        render(&[
+            (1, &l, pose([0.2, 1.0, 0.0], 80.0, [-0.06, 0.02, 0.55])),
+            (2, &s, pose([1.0, 1.0, 0.0], 140.0, [0.06, -0.01, 0.5])),
+        ]),
+        render(&[(2, &s, pose([0.0, 0.0, 1.0], 45.0, [0.0, 0.0, 0.4]))]),
+    ];
+    for (i, frame) in frames.iter().enumerate() {
+        let view = frame.view();
+        let mut prepared = 0;
+        let n = allocations_in(|| {
+            prepared = ws.prepare(&view, 100 + i as u64).unwrap();
+            icp.estimate(&view, &mut ws, &mut out).unwrap();
+        });
+        assert!(prepared >= 1);
+        assert_eq!(out.len(), prepared, "every instance got a pose");
+        assert_eq!(n, 0, "frame {i}: {n} allocations in prepare + estimate");
+    }
+}

@@ -1,0 +1,197 @@
+//! After a warm-up frame, `SegEngine::segment` performs no heap allocation on
+//! further frames of the same size, and its output feeds `Workspace::prepare`.
+//! Also measures the engine's time per frame (ignored test; run in release).
+//!
+//! A counting global allocator counts allocations made on the test's own
+//! thread while counting is switched on (other test threads don't interfere).
+
+mod common;
+
+use std::alloc::{GlobalAlloc, Layout, System};
+use std::cell::Cell;
+use std::collections::HashMap;
+
+use common::{l_block, object_set, step_block};
+use fusepose_estimator::net::meta::{self, object_entries};
+use fusepose_estimator::seg::file::{FORMAT, KEY_CONFIG};
+use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
+use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig};
+use fusepose_scene::{Intrinsics, ObjectSet};
+use safetensors::tensor::{Dtype, TensorView};
+
+struct CountingAllocator;
+
+thread_local! {
+    static COUNTING: Cell<bool> = const { Cell::new(false) };
+    static ALLOCATIONS: Cell<usize> = const { Cell::new(0) };
+}
+
+fn note_allocation() {
+    let counting = COUNTING.try_with(Cell::get).unwrap_or(false);
+    if counting {
+        let _ = ALLOCATIONS.try_with(|a| a.set(a.get() + 1));
+    }
+}
+
+unsafe impl GlobalAlloc for CountingAllocator {
+    unsafe fn alloc(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc(layout) }
+    }
+    unsafe fn alloc_zeroed(&self, layout: Layout) -> *mut u8 {
+        note_allocation();
+        unsafe { System.alloc_zeroed(layout) }
+    }
+    unsafe fn realloc(&self, ptr: *mut u8, layout: Layout, new_size: usize) -> *mut u8 {
+        note_allocation();
+        unsafe { System.realloc(ptr, layout, new_size) }
+    }
+    unsafe fn dealloc(&self, ptr: *mut u8, layout: Layout) {
+        unsafe { System.dealloc(ptr, layout) }
+    }
+}
+
+#[global_allocator]
+static GLOBAL: CountingAllocator = CountingAllocator;
+
+/// Allocations made by `f` on this thread.
+fn allocations_in(f: impl FnOnce()) -> usize {
+    ALLOCATIONS.with(|a| a.set(0));
+    COUNTING.with(|c| c.set(true));
+    f();
+    COUNTING.with(|c| c.set(false));
+    ALLOCATIONS.with(Cell::get)
+}
+
+/// A segmenter file with deterministic pseudo-random weights (no trainer needed).
+fn weight_bytes(cfg: &SegConfig, set: &ObjectSet) -> Vec<u8> {
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+    };
+    let shapes = cfg.tensor_shapes();
+    let data: Vec<Vec<u8>> = shapes
+        .iter()
+        .map(|(_, s)| {
+            let fan_in: usize = s.iter().skip(1).product::<usize>().max(1);
+            let scale = (6.0 / fan_in as f32).sqrt();
+            (0..s.iter().product::<usize>()).flat_map(|_| (next() * scale).to_le_bytes()).collect()
+        })
+        .collect();
+    let views: Vec<(String, TensorView<'_>)> = shapes
+        .iter()
+        .zip(&data)
+        .map(|((n, s), d)| (n.clone(), TensorView::new(Dtype::F32, s.clone(), d).unwrap()))
+        .collect();
+    let metadata = HashMap::from([
+        (meta::KEY_FORMAT.to_string(), FORMAT.to_string()),
+        (KEY_CONFIG.to_string(), serde_json::to_string(cfg).unwrap()),
+        (meta::KEY_OBJECTS.to_string(), serde_json::to_string(&object_entries(set)).unwrap()),
+    ]);
+    safetensors::serialize(views, Some(metadata)).unwrap()
+}
+
+fn engine(set: &ObjectSet) -> SegEngine {
+    let file = SegFile::from_bytes(&weight_bytes(&SegConfig::new(set.len()), set)).unwrap();
+    file.check_objects(set).unwrap();
+    SegEngine::new(&file).unwrap()
+}
+
+/// A 640x480 frame with structure (gradients, a near box, missing depth).
+fn frame_planes(shift: usize) -> (Vec<u8>, Vec<u16>) {
+    let (w, h) = (640usize, 480usize);
+    let mut color = vec![0u8; w * h * 3];
+    let mut depth = vec![0u16; w * h];
+    for p in 0..w * h {
+        let (u, v) = (p % w, p / w);
+        let near = (200 + shift..360 + shift).contains(&u) && (150..300).contains(&v);
+        color[3 * p..3 * p + 3].copy_from_slice(&[(u / 3) as u8, (v / 2) as u8, if near { 220 } else { 40 }]);
+        depth[p] = if p % 53 == 0 { 0 } else if near { 6000 } else { 9000 + v as u16 * 4 };
+    }
+    (color, depth)
+}
+
+fn view<'a>(color: &'a [u8], depth: &'a [u16]) -> FrameView<'a> {
+    FrameView {
+        intrinsics: Intrinsics::YCB_VIDEO,
+        color_format: ColorFormat::Rgb8,
+        color,
+        depth: DepthPlane::U16 { data: depth, scale: 1e-4 },
+        labels: None,
+    }
+}
+
+#[test]
+fn segment_does_not_allocate_after_warm_up_and_feeds_the_workspace() {
+    let set = object_set(&[l_block(), step_block()]);
+    let mut engine = engine(&set);
+    let (c0, d0) = frame_planes(0);
+    let (c1, d1) = frame_planes(40);
+    let mut labels = vec![0u16; 640 * 480];
+    engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    let first = labels.clone();
+    let n = allocations_in(|| {
+        engine.segment(&view(&c1, &d1), &mut labels).unwrap();
+        engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    });
+    assert_eq!(n, 0, "segment allocated {n} times after warm-up");
+    assert_eq!(labels, first, "same frame, same labels");
+    assert!(labels.iter().all(|&l| (l as usize) <= set.len()));
+
+    // The label plane is what Workspace::prepare consumes.
+    let mut ws = Workspace::new(WorkspaceConfig { num_classes: set.len() as u16, ..WorkspaceConfig::default() }).unwrap();
+    let frame = FrameView { labels: Some(LabelPlane::U16(&labels)), ..view(&c0, &d0) };
+    let count = ws.prepare(&frame, 1).unwrap();
+    let distinct: std::collections::BTreeSet<u16> = labels.iter().copied().filter(|&l| l > 0).collect();
+    assert!(count <= distinct.len() * WorkspaceConfig::default().max_instances);
+    for i in 0..count {
+        assert!(distinct.contains(&ws.instances[i].class_id));
+    }
+}
+
+#[test]
+fn engine_refuses_an_object_set_that_differs() {
+    let set = object_set(&[l_block(), step_block()]);
+    let file = SegFile::from_bytes(&weight_bytes(&SegConfig::new(2), &set)).unwrap();
+    assert!(file.check_objects(&object_set(&[step_block(), l_block()])).is_err());
+    assert!(file.check_objects(&object_set(&[l_block()])).is_err());
+    assert!(file.check_objects(&set).is_ok());
+}
+
+/// Median engine time per 640x480 frame over 50 frames (after 5 warm-up frames).
+/// `cargo test --release -p fusepose-estimator --test seg_no_alloc -- --ignored --nocapture`
+#[test]
+#[ignore]
+fn segment_time_per_frame() {
+    let set = fusepose_scene::builtin::builtin_objects();
+    let cfg = SegConfig::new(set.len());
+    let mut engine = engine(&set);
+    let (c0, d0) = frame_planes(0);
+    let (c1, d1) = frame_planes(40);
+    let mut labels = vec![0u16; 640 * 480];
+    for _ in 0..5 {
+        engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    }
+    let mut t = Vec::new();
+    let mut t_net = Vec::new();
+    let input = vec![0.1f32; 4 * cfg.input_width * cfg.input_height];
+    for i in 0..50 {
+        let (c, d) = if i % 2 == 0 { (&c0, &d0) } else { (&c1, &d1) };
+        let s = std::time::Instant::now();
+        engine.segment(&view(c, d), &mut labels).unwrap();
+        t.push(s.elapsed().as_secs_f64() * 1e3);
+        let s = std::time::Instant::now();
+        engine.forward(&input).unwrap();
+        t_net.push(s.elapsed().as_secs_f64() * 1e3);
+    }
+    t.sort_by(f64::total_cmp);
+    t_net.sort_by(f64::total_cmp);
+    let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
+    println!(
+        "segment 640x480: median {:.2} ms (p10 {:.2}, p90 {:.2}); network only: median {:.2} ms; {:.1} MMAC = {:.0} MFLOP; {} params; loadavg {}",
+        t[25], t[5], t[45], t_net[25], cfg.macs() as f64 / 1e6, 2.0 * cfg.macs() as f64 / 1e6, cfg.parameter_count(), load.trim()
+    );
+}

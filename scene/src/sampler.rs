@@ -1,0 +1,530 @@
+//! YCB-Video-like tabletop scenes: a textured table in a room, 3–8 objects
+//! resting on it in stable orientations with random yaw (no interpenetration,
+//! often close enough to occlude each other), random lighting, and cameras on
+//! a hemisphere 0.5–1.5 m away looking at the objects. A seed fixes everything.
+//!
+//! [`sample_scene`] draws a [`Scene`]; [`render_view`] renders one of its
+//! camera views (with optional sensor noise) and returns the [`FrameTruth`].
+//!
+//! Table frame: origin at the centre of the table top, z up, metres.
+
+pub mod backdrop;
+pub mod placement;
+pub mod viewpoint;
+
+use crate::render::{
+    self, ItemCoverage, Lighting, NoiseConfig, PixelBox, RenderError, RenderItem, RenderSettings, RenderTarget,
+};
+use crate::{Intrinsics, ObjectSet, Pose};
+use backdrop::Backdrop;
+use nalgebra::{Point3, Translation3, UnitQuaternion, Vector2, Vector3};
+use placement::{Footprint, RestPose, rest_poses};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64Mcg;
+use viewpoint::{ViewRanges, random_view};
+
+/// What [`sample_scene`] draws from. Defaults give YCB-Video-like scenes.
+#[derive(Clone, Debug, PartialEq)]
+pub struct SamplerConfig {
+    /// Objects per scene, inclusive range (3..=8).
+    pub min_objects: usize,
+    pub max_objects: usize,
+    /// Whether a class may appear twice in a scene (false; forced true when
+    /// the set has fewer classes than objects requested).
+    pub allow_duplicates: bool,
+    /// Probability that an object rests on its bottom face (−z of its frame);
+    /// otherwise a bounding-box face is drawn with probability ∝ its area (0.6).
+    pub upright_probability: f64,
+    /// Objects are first placed within this radius of the table centre; it
+    /// grows when a dense scene does not fit (metres, 0.18).
+    pub cluster_radius_m: f64,
+    /// Minimum gap between object footprints (metres, 0.003).
+    pub min_gap_m: f64,
+    /// Camera distance from the look-at point (metres, 0.5..1.5).
+    pub camera_distance_m: (f64, f64),
+    /// Camera elevation above the table plane (degrees, 15..75).
+    pub camera_elevation_deg: (f64, f64),
+    /// Camera roll: uniform in ±this (degrees, 5).
+    pub camera_max_roll_deg: f64,
+    /// The look-at point is the objects' centroid 5 cm above the table plus
+    /// a uniform jitter of ±this per axis (metres, 0.05).
+    pub look_at_jitter_m: f64,
+    /// Camera views per scene (1).
+    pub views: usize,
+    /// If set, each view is redrawn (at most `occlusion_tries` times) until at
+    /// least one object has a hidden fraction in this range, e.g. (0.3, 0.7).
+    pub target_occlusion: Option<(f64, f64)>,
+    pub occlusion_tries: usize,
+    /// Camera used to evaluate occlusion (rendered at a quarter resolution).
+    pub intrinsics: Intrinsics,
+}
+
+impl Default for SamplerConfig {
+    fn default() -> Self {
+        SamplerConfig {
+            min_objects: 3,
+            max_objects: 8,
+            allow_duplicates: false,
+            upright_probability: 0.6,
+            cluster_radius_m: 0.18,
+            min_gap_m: 0.003,
+            camera_distance_m: (0.5, 1.5),
+            camera_elevation_deg: (15.0, 75.0),
+            camera_max_roll_deg: 5.0,
+            look_at_jitter_m: 0.05,
+            views: 1,
+            target_occlusion: None,
+            occlusion_tries: 40,
+            intrinsics: Intrinsics::YCB_VIDEO,
+        }
+    }
+}
+
+/// Why a scene could not be sampled or rendered.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SamplerError {
+    #[error("the object set is empty")]
+    EmptyObjectSet,
+    #[error("invalid sampler config: {0}")]
+    InvalidConfig(&'static str),
+    #[error("could place only {placed} of the {required} objects required")]
+    Placement { placed: usize, required: usize },
+    #[error("scene object {index} has class {class_id}, which the object set lacks")]
+    UnknownClass { index: usize, class_id: u16 },
+    #[error("view {index} requested, the scene has {count}")]
+    NoSuchView { index: usize, count: usize },
+    #[error(transparent)]
+    Render(#[from] RenderError),
+}
+
+/// One object instance on the table.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PlacedObject {
+    /// Class id (1-based index into the [`ObjectSet`]).
+    pub class_id: u16,
+    /// Label of this instance in rendered label maps (1, 2, … in order).
+    pub instance_label: u16,
+    /// Object → table pose (metres).
+    pub table_from_object: Pose,
+}
+
+/// One camera of a scene.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraView {
+    /// Table → camera pose (metres).
+    pub camera_from_table: Pose,
+    /// False when `target_occlusion` was set and no try reached it (the view
+    /// closest to the target is kept); true otherwise.
+    pub occlusion_target_met: bool,
+}
+
+/// A sampled tabletop scene.
+#[derive(Clone, Debug)]
+pub struct Scene {
+    pub seed: u64,
+    pub objects: Vec<PlacedObject>,
+    pub backdrop: Backdrop,
+    /// Lights in the table frame.
+    pub lighting: Lighting,
+    pub views: Vec<CameraView>,
+}
+
+/// Ground truth of one object in one rendered frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct ObjectTruth {
+    pub class_id: u16,
+    pub instance_label: u16,
+    /// Object → camera pose (metres).
+    pub pose: Pose,
+    /// Visible pixels / pixels covered when alone (see [`ItemCoverage`]).
+    pub visible_fraction: f64,
+    pub visible_pixels: u32,
+    pub alone_pixels: u32,
+    /// Bounding box of the visible pixels; `None` when hidden or off-image.
+    pub bbox: Option<PixelBox>,
+}
+
+/// Ground truth of one rendered frame.
+#[derive(Clone, Debug, PartialEq)]
+pub struct FrameTruth {
+    pub view_index: usize,
+    pub camera_from_table: Pose,
+    pub intrinsics: Intrinsics,
+    /// In instance-label order (`objects[i].instance_label == i + 1`).
+    pub objects: Vec<ObjectTruth>,
+}
+
+impl FrameTruth {
+    /// Lookup table instance label → class id (index 0 = background → 0), for
+    /// [`RenderTarget::map_labels`] / [`RenderTarget::map_labels_in_place`].
+    pub fn class_lut(&self) -> Vec<u16> {
+        let max = self.objects.iter().map(|o| o.instance_label).max().unwrap_or(0) as usize;
+        let mut lut = vec![0u16; max + 1];
+        for o in &self.objects {
+            lut[o.instance_label as usize] = o.class_id;
+        }
+        lut
+    }
+}
+
+/// Which ids a label map carries.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum LabelKind {
+    /// One label per object instance (1, 2, …; 0 = background).
+    #[default]
+    Instance,
+    /// The object's class id (what the estimator consumes; 0 = background).
+    Class,
+}
+
+impl SamplerConfig {
+    fn validate(&self) -> Result<(), SamplerError> {
+        use SamplerError::InvalidConfig as E;
+        if self.min_objects == 0 || self.min_objects > self.max_objects {
+            return Err(E("need 1 <= min_objects <= max_objects"));
+        }
+        if self.max_objects > 1000 {
+            return Err(E("max_objects must be at most 1000"));
+        }
+        if !(0.0..=1.0).contains(&self.upright_probability) {
+            return Err(E("upright_probability must be in 0..=1"));
+        }
+        if !(self.cluster_radius_m > 0.0 && self.cluster_radius_m.is_finite()) {
+            return Err(E("cluster_radius_m must be > 0"));
+        }
+        if !(self.min_gap_m >= 0.0 && self.min_gap_m.is_finite()) {
+            return Err(E("min_gap_m must be >= 0"));
+        }
+        let (d0, d1) = self.camera_distance_m;
+        if !(d0 > 0.0 && d1 >= d0 && d1.is_finite()) {
+            return Err(E("camera_distance_m must be 0 < min <= max"));
+        }
+        let (e0, e1) = self.camera_elevation_deg;
+        if !(e0 > 0.0 && e1 >= e0 && e1 < 89.5) {
+            return Err(E("camera_elevation_deg must be 0 < min <= max < 89.5"));
+        }
+        if !(self.camera_max_roll_deg.is_finite() && self.look_at_jitter_m.is_finite() && self.look_at_jitter_m >= 0.0) {
+            return Err(E("camera_max_roll_deg and look_at_jitter_m must be finite (jitter >= 0)"));
+        }
+        if self.views == 0 {
+            return Err(E("views must be >= 1"));
+        }
+        if let Some((lo, hi)) = self.target_occlusion {
+            if !(0.0..=1.0).contains(&lo) || !(lo..=1.0).contains(&hi) {
+                return Err(E("target_occlusion must be 0 <= lo <= hi <= 1"));
+            }
+            if self.occlusion_tries == 0 {
+                return Err(E("occlusion_tries must be >= 1"));
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Draws a scene from `set`; the same set, config and seed give the same scene.
+pub fn sample_scene(set: &ObjectSet, cfg: &SamplerConfig, seed: u64) -> Result<Scene, SamplerError> {
+    cfg.validate()?;
+    if set.is_empty() {
+        return Err(SamplerError::EmptyObjectSet);
+    }
+    let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    let backdrop = Backdrop::random(&mut rng);
+    let lighting = Lighting::random_z_up(&mut rng);
+    let rests: Vec<Vec<RestPose>> = set.objects.iter().map(rest_poses).collect();
+    let objects = place_objects(&mut rng, set, &rests, &backdrop, cfg)?;
+
+    let views = draw_views(&mut rng, set, &objects, cfg, cfg.views)?;
+    Ok(Scene { seed, objects, backdrop, lighting, views })
+}
+
+/// Draws `count` camera views of `objects` (see [`SamplerConfig`]).
+fn draw_views(
+    rng: &mut Pcg64Mcg,
+    set: &ObjectSet,
+    objects: &[PlacedObject],
+    cfg: &SamplerConfig,
+    count: usize,
+) -> Result<Vec<CameraView>, SamplerError> {
+    let centroid = objects.iter().fold(Vector3::zeros(), |acc, o| acc + o.table_from_object.translation.vector)
+        / objects.len().max(1) as f64;
+    let ranges = ViewRanges {
+        distance_m: cfg.camera_distance_m,
+        elevation_deg: cfg.camera_elevation_deg,
+        max_roll_deg: cfg.camera_max_roll_deg,
+    };
+    let draw = |rng: &mut Pcg64Mcg| {
+        let j = cfg.look_at_jitter_m;
+        let jitter = if j > 0.0 {
+            Vector3::new(rng.random_range(-j..j), rng.random_range(-j..j), rng.random_range(-j..j))
+        } else {
+            Vector3::zeros()
+        };
+        let target = Point3::new(centroid.x, centroid.y, 0.05) + jitter;
+        random_view(rng, &ranges, target)
+    };
+    let mut occlusion = cfg.target_occlusion.map(|range| OcclusionProbe::new(&cfg.intrinsics, range));
+    let mut views = Vec::with_capacity(count);
+    for _ in 0..count {
+        let first = draw(rng);
+        let view = match occlusion.as_mut() {
+            None => CameraView { camera_from_table: first, occlusion_target_met: true },
+            Some(probe) => {
+                // Keep the first view that meets the target, else the closest miss.
+                let (mut best, mut best_miss) = (first, probe.miss(set, objects, &first)?);
+                for _ in 1..cfg.occlusion_tries {
+                    if best_miss == 0.0 {
+                        break;
+                    }
+                    let pose = draw(rng);
+                    let miss = probe.miss(set, objects, &pose)?;
+                    if miss < best_miss {
+                        (best, best_miss) = (pose, miss);
+                    }
+                }
+                CameraView { camera_from_table: best, occlusion_target_met: best_miss == 0.0 }
+            }
+        };
+        views.push(view);
+    }
+    Ok(views)
+}
+
+/// Places objects by rejection sampling of footprints; retries the layout a
+/// few times before giving up on `min_objects`.
+fn place_objects(
+    rng: &mut Pcg64Mcg,
+    set: &ObjectSet,
+    rests: &[Vec<RestPose>],
+    backdrop: &Backdrop,
+    cfg: &SamplerConfig,
+) -> Result<Vec<PlacedObject>, SamplerError> {
+    const LAYOUT_ATTEMPTS: usize = 8;
+    const TRIES_PER_RADIUS: usize = 40;
+    const RADIUS_STEPS: usize = 4;
+    let [tx, ty] = backdrop.table_half_extent;
+    let mut best: Vec<PlacedObject> = Vec::new();
+    for _ in 0..LAYOUT_ATTEMPTS {
+        let n = rng.random_range(cfg.min_objects..=cfg.max_objects);
+        let classes: Vec<u16> = if !cfg.allow_duplicates && set.len() >= n {
+            rand::seq::index::sample(rng, set.len(), n).into_iter().map(|i| i as u16 + 1).collect()
+        } else {
+            (0..n).map(|_| rng.random_range(0..set.len()) as u16 + 1).collect()
+        };
+        let mut placed: Vec<PlacedObject> = Vec::with_capacity(n);
+        let mut footprints: Vec<Footprint> = Vec::with_capacity(n);
+        for class_id in classes {
+            let options = &rests[class_id as usize - 1];
+            let mut radius = cfg.cluster_radius_m;
+            'radius: for _ in 0..RADIUS_STEPS {
+                for _ in 0..TRIES_PER_RADIUS {
+                    let rest = choose_rest(rng, options, cfg.upright_probability);
+                    let yaw = rng.random_range(0.0..std::f64::consts::TAU);
+                    let (r, phi) = (radius * rng.random::<f64>().sqrt(), rng.random_range(0.0..std::f64::consts::TAU));
+                    let pos = Vector2::new(r * phi.cos(), r * phi.sin());
+                    let fp = Footprint::of(rest, yaw, pos);
+                    let fr = fp.radius();
+                    if fp.centre.x.abs() + fr > tx || fp.centre.y.abs() + fr > ty {
+                        continue;
+                    }
+                    if footprints.iter().any(|o| o.overlaps(&fp, cfg.min_gap_m)) {
+                        continue;
+                    }
+                    let rotation = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), yaw) * rest.rotation;
+                    let pose = Pose::from_parts(Translation3::new(pos.x, pos.y, rest.lift), rotation);
+                    footprints.push(fp);
+                    placed.push(PlacedObject {
+                        class_id,
+                        instance_label: placed.len() as u16 + 1,
+                        table_from_object: pose,
+                    });
+                    break 'radius;
+                }
+                radius *= 1.3;
+            }
+        }
+        if placed.len() >= cfg.min_objects {
+            return Ok(placed);
+        }
+        if placed.len() > best.len() {
+            best = placed;
+        }
+    }
+    Err(SamplerError::Placement { placed: best.len(), required: cfg.min_objects })
+}
+
+/// Upright with probability `p_upright`, else a face with probability ∝ area.
+fn choose_rest<'r>(rng: &mut Pcg64Mcg, options: &'r [RestPose], p_upright: f64) -> &'r RestPose {
+    if rng.random_bool(p_upright)
+        && let Some(r) = options.iter().find(|r| r.upright)
+    {
+        return r;
+    }
+    let total: f64 = options.iter().map(|r| r.face_area).sum();
+    if total > 0.0 {
+        let mut x = rng.random::<f64>() * total;
+        for r in options {
+            if x < r.face_area {
+                return r;
+            }
+            x -= r.face_area;
+        }
+    }
+    &options[rng.random_range(0..options.len())]
+}
+
+/// Renders the objects alone at quarter resolution to measure occlusion.
+struct OcclusionProbe {
+    k: Intrinsics,
+    range: (f64, f64),
+    target: RenderTarget,
+    settings: RenderSettings,
+}
+
+impl OcclusionProbe {
+    /// Objects smaller than this (pixels at quarter resolution) are ignored.
+    const MIN_PIXELS: u32 = 24;
+
+    fn new(k: &Intrinsics, range: (f64, f64)) -> OcclusionProbe {
+        let s = 0.25;
+        let k = Intrinsics {
+            fx: k.fx * s,
+            fy: k.fy * s,
+            cx: (k.cx + 0.5) * s - 0.5,
+            cy: (k.cy + 0.5) * s - 0.5,
+            width: (k.width / 4).max(1),
+            height: (k.height / 4).max(1),
+        };
+        OcclusionProbe { k, range, target: RenderTarget::for_intrinsics(&k), settings: RenderSettings::default() }
+    }
+
+    /// 0 when some object's hidden fraction is inside the range; else the
+    /// smallest distance of any object's hidden fraction to it.
+    fn miss(&mut self, set: &ObjectSet, objects: &[PlacedObject], cam: &Pose) -> Result<f64, SamplerError> {
+        let mut items = Vec::with_capacity(objects.len());
+        for (i, o) in objects.iter().enumerate() {
+            let model = set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
+            items.push(RenderItem { mesh: &model.mesh, pose: cam * o.table_from_object, instance_label: o.instance_label });
+        }
+        render::render_scene(&items, &self.k, &self.settings, &mut self.target)?;
+        let (lo, hi) = self.range;
+        let mut best = f64::INFINITY;
+        for c in self.target.coverage() {
+            if c.alone_pixels < Self::MIN_PIXELS {
+                continue;
+            }
+            let hidden = 1.0 - c.visible_fraction();
+            let d = if hidden < lo { lo - hidden } else if hidden > hi { hidden - hi } else { 0.0 };
+            best = best.min(d);
+        }
+        Ok(best)
+    }
+}
+
+/// The seed of the sensor noise for a scene's view.
+fn noise_seed(scene_seed: u64, view: usize) -> u64 {
+    let mut h = scene_seed ^ 0x9E37_79B9_7F4A_7C15u64.wrapping_mul(view as u64 + 1);
+    h ^= h >> 31;
+    h = h.wrapping_mul(0xBF58_476D_1CE4_E5B9);
+    h ^ (h >> 29)
+}
+
+impl Scene {
+    /// Appends `count` more camera views drawn from `seed` with the camera
+    /// rules of `cfg` (distance, elevation, roll, occlusion target), e.g. for
+    /// multi-frame scenes. Deterministic for the scene, config and seed.
+    pub fn add_views(&mut self, set: &ObjectSet, cfg: &SamplerConfig, count: usize, seed: u64) -> Result<(), SamplerError> {
+        cfg.validate()?;
+        let mut rng = Pcg64Mcg::seed_from_u64(seed ^ self.seed.rotate_left(17));
+        let views = draw_views(&mut rng, set, &self.objects, cfg, count)?;
+        self.views.extend(views);
+        Ok(())
+    }
+
+    /// Object → camera pose of every object in view `view` (`None` if no such view).
+    pub fn object_poses(&self, view: usize) -> Option<Vec<Pose>> {
+        let cam = self.views.get(view)?.camera_from_table;
+        Some(self.objects.iter().map(|o| cam * o.table_from_object).collect())
+    }
+
+    /// The render list of a view: table and room (label 0), then the objects
+    /// (their instance labels) in scene order.
+    pub fn render_items<'a>(&'a self, set: &'a ObjectSet, view: usize) -> Result<Vec<RenderItem<'a>>, SamplerError> {
+        let cam = self
+            .views
+            .get(view)
+            .ok_or(SamplerError::NoSuchView { index: view, count: self.views.len() })?
+            .camera_from_table;
+        let mut items = Vec::with_capacity(self.objects.len() + 2);
+        items.push(RenderItem { mesh: &self.backdrop.table, pose: cam, instance_label: 0 });
+        items.push(RenderItem { mesh: &self.backdrop.room, pose: cam, instance_label: 0 });
+        for (i, o) in self.objects.iter().enumerate() {
+            let model = set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
+            items.push(RenderItem { mesh: &model.mesh, pose: cam * o.table_from_object, instance_label: o.instance_label });
+        }
+        Ok(items)
+    }
+}
+
+/// Number of background items [`Scene::render_items`] puts before the objects.
+const BACKGROUND_ITEMS: usize = 2;
+
+/// Renders view `view` of `scene` into `target` (instance labels), applies
+/// `noise` (seeded from the scene seed and view index) and returns the truth.
+pub fn render_view(
+    scene: &Scene,
+    set: &ObjectSet,
+    view: usize,
+    k: &Intrinsics,
+    noise: &NoiseConfig,
+    target: &mut RenderTarget,
+) -> Result<FrameTruth, SamplerError> {
+    let items = scene.render_items(set, view)?;
+    let cam = scene.views[view].camera_from_table;
+    let settings = RenderSettings {
+        lighting: scene.lighting.rotated(&cam.rotation.to_rotation_matrix()),
+        background_rgb: [90, 90, 90],
+        ..RenderSettings::default()
+    };
+    if target.width() != k.width || target.height() != k.height {
+        target.resize(k.width, k.height);
+    }
+    render::render_scene(&items, k, &settings, target)?;
+    render::apply_noise(target, noise, noise_seed(scene.seed, view));
+    let objects = scene
+        .objects
+        .iter()
+        .zip(&target.coverage()[BACKGROUND_ITEMS..])
+        .zip(&items[BACKGROUND_ITEMS..])
+        .map(|((o, c), item): ((&PlacedObject, &ItemCoverage), &RenderItem)| ObjectTruth {
+            class_id: o.class_id,
+            instance_label: o.instance_label,
+            pose: item.pose,
+            visible_fraction: c.visible_fraction(),
+            visible_pixels: c.visible_pixels,
+            alone_pixels: c.alone_pixels,
+            bbox: c.bbox,
+        })
+        .collect();
+    Ok(FrameTruth { view_index: view, camera_from_table: cam, intrinsics: *k, objects })
+}
+
+/// Like [`render_view`], then rewrites the label map as `kind` asks (class
+/// ids through [`FrameTruth::class_lut`]; one cheap pass).
+pub fn render_view_labelled(
+    scene: &Scene,
+    set: &ObjectSet,
+    view: usize,
+    k: &Intrinsics,
+    noise: &NoiseConfig,
+    kind: LabelKind,
+    target: &mut RenderTarget,
+) -> Result<FrameTruth, SamplerError> {
+    let truth = render_view(scene, set, view, k, noise, target)?;
+    if kind == LabelKind::Class {
+        target.map_labels_in_place(&truth.class_lut());
+    }
+    Ok(truth)
+}
+
+#[cfg(test)]
+mod tests;

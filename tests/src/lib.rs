@@ -1,0 +1,358 @@
+//! Harness for the multi-process integration tests in `tests/tests/`: an
+//! isolated iceoryx2 root path and prefix per test, the `fuseposed` binary
+//! (built on demand with cargo, same profile and target directory), and
+//! child processes that are killed when a test ends.
+//!
+//! The test producer and consumer are binaries of this package
+//! (`fp-test-producer`, `fp-test-consumer`), so cargo builds them for the tests.
+
+use std::io::{BufRead, BufReader};
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::mpsc::{Receiver, channel};
+use std::sync::{Mutex, OnceLock};
+use std::time::{Duration, Instant};
+
+use anyhow::{Context, bail};
+
+/// A per-test iceoryx2 namespace and scratch directory.
+pub struct TestEnv {
+    pub dir: tempfile::TempDir,
+    pub iox_root: PathBuf,
+    pub prefix: String,
+}
+
+impl TestEnv {
+    pub fn new(name: &str) -> anyhow::Result<Self> {
+        static COUNTER: AtomicUsize = AtomicUsize::new(0);
+        let dir = tempfile::Builder::new().prefix(&format!("fusepose-{name}-")).tempdir()?;
+        let iox_root = dir.path().join("iox2");
+        std::fs::create_dir_all(&iox_root)?;
+        let prefix = format!("fpt{}x{}_", std::process::id(), COUNTER.fetch_add(1, Ordering::Relaxed));
+        Ok(Self { dir, iox_root, prefix })
+    }
+
+    /// Options for in-test-process iceoryx2 use (stats queries).
+    pub fn ipc_options(&self) -> fusepose_client::IpcOptions {
+        fusepose_client::IpcOptions {
+            root_path: Some(self.iox_root.clone()),
+            prefix: Some(self.prefix.clone()),
+            ..Default::default()
+        }
+    }
+
+    /// Sets the iceoryx2 namespace for a child process.
+    pub fn apply(&self, cmd: &mut Command) {
+        cmd.env("FUSEPOSE_IOX2_ROOT", &self.iox_root).env("FUSEPOSE_IOX2_PREFIX", &self.prefix);
+    }
+
+    pub fn hlog_path(&self) -> PathBuf {
+        self.dir.path().join("fuseposed.hlog")
+    }
+
+    /// Writes a daemon config for camera `cam0` in this namespace; `extra` is
+    /// appended verbatim inside `[estimator]` (e.g. `kind = "none"`).
+    pub fn write_daemon_config(&self, estimator: &str) -> anyhow::Result<PathBuf> {
+        let path = self.dir.path().join("fuseposed.toml");
+        let text = format!(
+            "cameras = [\"cam0\"]\nlog_level = \"info\"\n\n[estimator]\n{estimator}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 1.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\n",
+            self.hlog_path(),
+            self.iox_root,
+            self.prefix
+        );
+        std::fs::write(&path, text)?;
+        Ok(path)
+    }
+}
+
+impl Drop for TestEnv {
+    fn drop(&mut self) {
+        // Shared memory of killed processes: remove this test's objects only.
+        if let Ok(entries) = std::fs::read_dir("/dev/shm") {
+            for entry in entries.flatten() {
+                if entry.file_name().to_string_lossy().starts_with(&self.prefix) {
+                    let _ = std::fs::remove_file(entry.path());
+                }
+            }
+        }
+    }
+}
+
+/// The `fuseposed` binary, built once per test process with the cargo that runs the tests.
+pub fn daemon_binary() -> anyhow::Result<PathBuf> {
+    static BUILT: OnceLock<Mutex<Option<PathBuf>>> = OnceLock::new();
+    let cell = BUILT.get_or_init(|| Mutex::new(None));
+    let mut built = cell.lock().unwrap_or_else(|e| e.into_inner());
+    if let Some(path) = built.as_ref() {
+        return Ok(path.clone());
+    }
+    let profile_dir = profile_dir()?;
+    let profile_dir = profile_dir.as_path();
+    let target_dir = profile_dir.parent().context("profile directory has no parent")?;
+    let profile = profile_dir.file_name().and_then(|s| s.to_str()).unwrap_or("debug");
+    let workspace = Path::new(env!("CARGO_MANIFEST_DIR")).parent().context("no workspace root")?;
+    let mut cmd = Command::new(env!("CARGO"));
+    cmd.current_dir(workspace)
+        .args(["build", "--quiet", "-p", "fusepose-daemon", "--bin", "fuseposed", "--target-dir"])
+        .arg(target_dir);
+    if profile == "release" {
+        cmd.arg("--release");
+    }
+    let status = cmd.status().context("running cargo build for fuseposed")?;
+    if !status.success() {
+        bail!("cargo build -p fusepose-daemon failed: {status}");
+    }
+    let path = profile_dir.join("fuseposed");
+    if !path.exists() {
+        bail!("{} missing after cargo build", path.display());
+    }
+    *built = Some(path.clone());
+    Ok(path)
+}
+
+/// A child process killed (SIGKILL) when dropped, with its stdout lines on a channel.
+pub struct Proc {
+    pub name: &'static str,
+    pub child: Child,
+    pub lines: Receiver<String>,
+}
+
+impl Proc {
+    /// Spawns `cmd` with piped stdout (lines collected) and stderr inherited.
+    pub fn spawn(name: &'static str, mut cmd: Command) -> anyhow::Result<Self> {
+        cmd.stdout(Stdio::piped()).stderr(Stdio::inherit());
+        let mut child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
+        let stdout = child.stdout.take().context("no stdout")?;
+        let (tx, lines) = channel();
+        std::thread::spawn(move || {
+            for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+                if tx.send(line).is_err() {
+                    break;
+                }
+            }
+        });
+        Ok(Self { name, child, lines })
+    }
+
+    pub fn pid(&self) -> i32 {
+        self.child.id() as i32
+    }
+
+    /// Sends `signal` (e.g. `libc::SIGTERM`).
+    pub fn signal(&self, signal: i32) {
+        // SAFETY: kill(2) on our own child's pid.
+        unsafe { libc::kill(self.pid(), signal) };
+    }
+
+    /// Waits for the exit status up to `timeout`.
+    pub fn wait_timeout(&mut self, timeout: Duration) -> anyhow::Result<std::process::ExitStatus> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if let Some(status) = self.child.try_wait()? {
+                return Ok(status);
+            }
+            if Instant::now() > deadline {
+                bail!("{} did not exit within {timeout:?}", self.name);
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+    }
+
+    /// Collects stdout lines until `done(all lines so far)` or `timeout`.
+    pub fn collect_until(&self, out: &mut Vec<String>, timeout: Duration, done: impl Fn(&[String]) -> bool) -> bool {
+        let deadline = Instant::now() + timeout;
+        loop {
+            if done(out) {
+                return true;
+            }
+            let left = deadline.saturating_duration_since(Instant::now());
+            if left.is_zero() {
+                return false;
+            }
+            match self.lines.recv_timeout(left.min(Duration::from_millis(50))) {
+                Ok(line) => out.push(line),
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => return done(out),
+            }
+        }
+    }
+
+    /// Waits for a stdout line starting with `prefix`.
+    pub fn wait_for_line(&self, prefix: &str, timeout: Duration) -> anyhow::Result<String> {
+        let deadline = Instant::now() + timeout;
+        loop {
+            let left = deadline.saturating_duration_since(Instant::now());
+            match self.lines.recv_timeout(left) {
+                Ok(line) if line.starts_with(prefix) => return Ok(line),
+                Ok(_) => {}
+                Err(_) => bail!("{}: no line starting with {prefix:?} within {timeout:?}", self.name),
+            }
+        }
+    }
+}
+
+impl Drop for Proc {
+    fn drop(&mut self) {
+        if let Ok(None) = self.child.try_wait() {
+            let _ = self.child.kill();
+            let _ = self.child.wait();
+        }
+    }
+}
+
+/// `<target>/<profile>/` of the running test binary (`<profile>/deps/<test>`).
+fn profile_dir() -> anyhow::Result<PathBuf> {
+    let exe = std::env::current_exe()?;
+    Ok(exe.parent().and_then(Path::parent).context("test binary has no profile directory")?.to_owned())
+}
+
+/// A binary of this package (cargo builds them before running integration tests).
+pub fn package_binary(name: &str) -> anyhow::Result<PathBuf> {
+    let path = profile_dir()?.join(name);
+    anyhow::ensure!(path.exists(), "{} missing: run through `cargo test -p fusepose-tests`", path.display());
+    Ok(path)
+}
+
+/// One line printed by `fp-test-consumer` per pose message.
+#[derive(Clone, Debug, PartialEq)]
+pub struct PoseLine {
+    pub sequence: u64,
+    pub status: u32,
+    pub invalid_reason: u32,
+    pub objects: u16,
+    pub camera_id: u32,
+    pub capture_ns: u64,
+    pub received_ns: u64,
+    pub published_ns: u64,
+}
+
+impl PoseLine {
+    /// Parses `pose seq=.. status=.. reason=.. objects=.. camera=.. capture=.. received=.. published=..`.
+    pub fn parse(line: &str) -> Option<Self> {
+        let rest = line.strip_prefix("pose ")?;
+        let mut fields = std::collections::HashMap::new();
+        for kv in rest.split_whitespace() {
+            let (k, v) = kv.split_once('=')?;
+            fields.insert(k, v.parse::<u64>().ok()?);
+        }
+        Some(Self {
+            sequence: *fields.get("seq")?,
+            status: *fields.get("status")? as u32,
+            invalid_reason: *fields.get("reason")? as u32,
+            objects: *fields.get("objects")? as u16,
+            camera_id: *fields.get("camera")? as u32,
+            capture_ns: *fields.get("capture")?,
+            received_ns: *fields.get("received")?,
+            published_ns: *fields.get("published")?,
+        })
+    }
+
+    pub fn format(msg: &fusepose_client::PoseMessage) -> String {
+        format!(
+            "pose seq={} status={} reason={} objects={} camera={} capture={} received={} published={}",
+            msg.frame_sequence,
+            msg.status,
+            msg.invalid_reason,
+            msg.object_count,
+            msg.camera_id,
+            msg.capture_time_ns,
+            msg.received_time_ns,
+            msg.published_time_ns
+        )
+    }
+}
+
+/// Starts `fuseposed --config <config>` in `env`'s namespace and waits until it answers stats.
+pub fn start_daemon(env: &TestEnv, config: &Path) -> anyhow::Result<Proc> {
+    let mut cmd = Command::new(daemon_binary()?);
+    cmd.arg("--config").arg(config).current_dir(env.dir.path());
+    let daemon = Proc::spawn("fuseposed", cmd)?;
+    query_stats(env, Duration::from_secs(20)).context("fuseposed never answered a stats request")?;
+    Ok(daemon)
+}
+
+/// Asks the daemon for camera `cam0`'s stats, retrying until `timeout`.
+pub fn query_stats(env: &TestEnv, timeout: Duration) -> anyhow::Result<fusepose_client::StatsSnapshot> {
+    let ipc = fusepose_client::Ipc::new(&env.ipc_options())?;
+    let client = fusepose_client::StatsClient::open(&ipc, "cam0")?;
+    let deadline = Instant::now() + timeout;
+    loop {
+        match client.query(Duration::from_millis(500)) {
+            Ok(s) => return Ok(s),
+            Err(e) if Instant::now() > deadline => return Err(e.into()),
+            Err(_) => {}
+        }
+    }
+}
+
+/// Starts the test producer: `frames` frames (0 = forever) at `fps` from sequence `start`,
+/// breaking the frames whose sequence is in `malformed`.
+pub fn start_producer(env: &TestEnv, frames: u64, fps: f64, start: u64, malformed: &[u64]) -> anyhow::Result<Proc> {
+    let mut cmd = Command::new(package_binary("fp-test-producer")?);
+    env.apply(&mut cmd);
+    cmd.args(["cam0", &frames.to_string(), &fps.to_string(), &start.to_string()]);
+    cmd.args(malformed.iter().map(u64::to_string));
+    let p = Proc::spawn("fp-test-producer", cmd)?;
+    p.wait_for_line("ready", Duration::from_secs(10))?;
+    Ok(p)
+}
+
+/// Starts a test consumer that prints pose lines for up to `duration`.
+pub fn start_consumer(env: &TestEnv, duration: Duration) -> anyhow::Result<Proc> {
+    let mut cmd = Command::new(package_binary("fp-test-consumer")?);
+    env.apply(&mut cmd);
+    cmd.args(["cam0", &duration.as_millis().to_string()]);
+    let p = Proc::spawn("fp-test-consumer", cmd)?;
+    p.wait_for_line("ready", Duration::from_secs(10))?;
+    Ok(p)
+}
+
+/// Pose lines among a consumer's output.
+pub fn pose_lines(lines: &[String]) -> Vec<PoseLine> {
+    lines.iter().filter_map(|l| PoseLine::parse(l)).collect()
+}
+
+/// Every interval histogram of an `.hlog` file, with its tag, decoded by hdrhistogram's own parser.
+pub fn read_hlog(path: &Path) -> anyhow::Result<Vec<(String, hdrhistogram::Histogram<u64>)>> {
+    use hdrhistogram::serialization::Deserializer;
+    use hdrhistogram::serialization::interval_log::{IntervalLogIterator, LogEntry};
+    let text = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out = Vec::new();
+    for entry in IntervalLogIterator::new(&text) {
+        let entry = entry.map_err(|e| anyhow::anyhow!("{}: unreadable entry: {e:?}", path.display()))?;
+        if let LogEntry::Interval(interval) = entry {
+            let tag = interval.tag().map(|t| t.as_str().to_owned()).unwrap_or_default();
+            let bytes = base64_decode(interval.encoded_histogram())?;
+            let h: hdrhistogram::Histogram<u64> = Deserializer::new()
+                .deserialize(&mut &bytes[..])
+                .map_err(|e| anyhow::anyhow!("{}: bad histogram for {tag}: {e:?}", path.display()))?;
+            out.push((tag, h));
+        }
+    }
+    Ok(out)
+}
+
+/// Standard base64 (with padding) → bytes.
+fn base64_decode(s: &str) -> anyhow::Result<Vec<u8>> {
+    let val = |c: u8| -> anyhow::Result<u32> {
+        Ok(match c {
+            b'A'..=b'Z' => c - b'A',
+            b'a'..=b'z' => c - b'a' + 26,
+            b'0'..=b'9' => c - b'0' + 52,
+            b'+' => 62,
+            b'/' => 63,
+            _ => bail!("invalid base64 character {c:#x}"),
+        } as u32)
+    };
+    let bytes: Vec<u8> = s.bytes().filter(|&c| c != b'=').collect();
+    let mut out = Vec::with_capacity(bytes.len() * 3 / 4);
+    for chunk in bytes.chunks(4) {
+        let mut acc = 0u32;
+        for (i, &c) in chunk.iter().enumerate() {
+            acc |= val(c)? << (18 - 6 * i);
+        }
+        out.extend_from_slice(&acc.to_be_bytes()[1..chunk.len()]);
+    }
+    Ok(out)
+}

@@ -1,0 +1,382 @@
+//! Training samples rendered on the fly: tabletop scenes from
+//! `scene::sampler`, rendered with sensor noise by `scene::render`, turned into
+//! network inputs by `estimator::Workspace::prepare` — exactly the inference
+//! path. A background thread fills a bounded crossbeam channel.
+//!
+//! One rendered frame gives one sample per instance found in its class label
+//! map, matched to the ground truth by class id (the sampler draws each class at
+//! most once per scene). Augmentation (training only): per-channel colour gain
+//! and bias on the normalised crop, 1 mm Gaussian point jitter, and a uniform
+//! ±2 cm shift of the whole cloud applied to the ground truth as well.
+//! Occluders come from the cluttered scenes; depth noise from the renderer.
+//!
+//! Alternatively ([`Source::Bop`]) frames come from a BOP dataset whose obj_ids
+//! are the object set's class ids: frames with index % 10 != 0 train, the rest
+//! validate; instances are matched to the ground truth of their class whose
+//! visible box centre is nearest.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+
+use self::rand_distr_free::gauss;
+use anyhow::Context;
+use crossbeam::channel::{Receiver, bounded};
+use fusepose_estimator::{
+    ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig,
+};
+use fusepose_scene::bop::BopDataset;
+use fusepose_scene::render::{NoiseConfig, RenderTarget};
+use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
+use fusepose_scene::{Intrinsics, ObjectSet, Pose};
+use nalgebra::{Translation3, Vector3};
+use rand::seq::SliceRandom;
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// One object instance, as the network sees it, with its ground truth.
+#[derive(Clone, Debug)]
+pub struct Sample {
+    /// `[3,S,S]` normalised crop.
+    pub crop: Vec<f32>,
+    /// `[N,3]` camera-frame points, metres.
+    pub points: Vec<f32>,
+    /// `[N]` crop pixel index of each point.
+    pub choose: Vec<u32>,
+    /// 0-based class index.
+    pub class: usize,
+    /// Object → camera.
+    pub pose: Pose,
+}
+
+/// What the generator produces.
+#[derive(Clone, Debug)]
+pub struct DataConfig {
+    pub num_points: usize,
+    pub crop_size: usize,
+    /// Instances with fewer distinct valid-depth points are skipped.
+    pub min_points: usize,
+    /// Instances less visible than this are skipped.
+    pub min_visible: f64,
+    pub augment: bool,
+}
+
+/// Tiny Gaussian helper (Box–Muller), so no extra dependency is needed.
+mod rand_distr_free {
+    use rand::Rng;
+    pub fn gauss<R: Rng>(rng: &mut R) -> f32 {
+        let u1: f64 = rng.random_range(1e-12..1.0);
+        let u2: f64 = rng.random::<f64>();
+        ((-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()) as f32
+    }
+}
+
+/// Where frames come from.
+#[derive(Clone, Debug)]
+pub enum Source {
+    /// Tabletop scenes rendered on the fly (seeded).
+    Rendered,
+    /// A BOP dataset split (class ids = obj_ids).
+    Bop(Arc<BopDataset>),
+}
+
+impl Source {
+    /// Opens `DIR` (a split folder such as `out/train`) and checks its classes against `set`.
+    pub fn bop(dir: &std::path::Path, set: &ObjectSet) -> anyhow::Result<Self> {
+        let ds = BopDataset::open(dir)
+            .with_context(|| format!("opening BOP split {}", dir.display()))?;
+        if ds.is_empty() {
+            anyhow::bail!("{} has no frames", dir.display());
+        }
+        if let Some(m) = ds.manifest() {
+            for c in &m.classes {
+                let ours = set.by_class(c.obj_id).map(|o| o.name.as_str());
+                if ours != Some(c.name.as_str()) {
+                    anyhow::bail!(
+                        "dataset class {} is `{}`, the object set has {:?}",
+                        c.obj_id,
+                        c.name,
+                        ours
+                    );
+                }
+            }
+        }
+        Ok(Source::Bop(Arc::new(ds)))
+    }
+}
+
+/// Frames of a BOP dataset used for training (`val = false`) or validation.
+pub fn bop_indices(ds: &BopDataset, val: bool) -> Vec<usize> {
+    (0..ds.len()).filter(|i| (i % 10 == 0) == val).collect()
+}
+
+/// Ground truth of one object in a frame, for matching instances.
+struct Truth {
+    class_id: u16,
+    pose: Pose,
+    visible: f64,
+    /// Centre of the visible box (pixels), if any.
+    centre: Option<(f64, f64)>,
+}
+
+/// Renders scene `seed` and returns its samples. `ws` and `target` are reused.
+pub fn frame_samples(
+    set: &ObjectSet,
+    cfg: &DataConfig,
+    seed: u64,
+    ws: &mut Workspace,
+    target: &mut RenderTarget,
+) -> anyhow::Result<Vec<Sample>> {
+    let sampler = SamplerConfig::default();
+    let k = Intrinsics::YCB_VIDEO;
+    let scene = match sample_scene(set, &sampler, seed) {
+        Ok(s) => s,
+        Err(fusepose_scene::sampler::SamplerError::Placement { .. }) => return Ok(Vec::new()),
+        Err(e) => return Err(e).context("sampling a scene"),
+    };
+    let truth = render_view_labelled(
+        &scene,
+        set,
+        0,
+        &k,
+        &NoiseConfig::default(),
+        LabelKind::Class,
+        target,
+    )
+    .context("rendering a scene")?;
+    let frame = FrameView {
+        intrinsics: k,
+        color_format: ColorFormat::Rgb8,
+        color: target.rgb(),
+        depth: DepthPlane::F32(target.depth_m()),
+        labels: Some(LabelPlane::U16(target.labels())),
+    };
+    let truths: Vec<Truth> = truth
+        .objects
+        .iter()
+        .map(|o| Truth {
+            class_id: o.class_id,
+            pose: o.pose,
+            visible: o.visible_fraction,
+            centre: o.bbox.map(|b| {
+                (
+                    (b.u_min + b.u_max) as f64 / 2.0,
+                    (b.v_min + b.v_max) as f64 / 2.0,
+                )
+            }),
+        })
+        .collect();
+    samples_from_frame(&frame, &truths, cfg, seed, ws)
+}
+
+/// Loads BOP frame `index` and returns its samples.
+pub fn bop_frame_samples(
+    ds: &BopDataset,
+    index: usize,
+    cfg: &DataConfig,
+    seed: u64,
+    ws: &mut Workspace,
+) -> anyhow::Result<Vec<Sample>> {
+    let f = ds
+        .load(index)
+        .with_context(|| format!("loading BOP frame {index}"))?;
+    let frame = FrameView {
+        intrinsics: f.intrinsics,
+        color_format: ColorFormat::Rgb8,
+        color: &f.rgb,
+        depth: DepthPlane::U16 {
+            data: &f.depth,
+            scale: f.depth_unit_m as f32,
+        },
+        labels: Some(LabelPlane::U16(&f.labels)),
+    };
+    let truths: Vec<Truth> =
+        f.gt.iter()
+            .map(|g| Truth {
+                class_id: g.obj_id,
+                pose: g.pose,
+                visible: g.visib_fract,
+                centre: (g.bbox_visib[2] > 0).then(|| {
+                    (
+                        g.bbox_visib[0] as f64 + g.bbox_visib[2] as f64 / 2.0,
+                        g.bbox_visib[1] as f64 + g.bbox_visib[3] as f64 / 2.0,
+                    )
+                }),
+            })
+            .collect();
+    samples_from_frame(&frame, &truths, cfg, seed, ws)
+}
+
+fn samples_from_frame(
+    frame: &FrameView<'_>,
+    truths: &[Truth],
+    cfg: &DataConfig,
+    seed: u64,
+    ws: &mut Workspace,
+) -> anyhow::Result<Vec<Sample>> {
+    let count = ws.prepare(frame, seed).context("preparing the workspace")?;
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0x5eed_da7a);
+    let (n, s) = (cfg.num_points, cfg.crop_size);
+    let mut out = Vec::with_capacity(count);
+    for i in 0..count {
+        let inst = ws.instances[i];
+        let (cu, cv) = (
+            (inst.bbox[0] as f64 + inst.bbox[2] as f64) / 2.0,
+            (inst.bbox[1] as f64 + inst.bbox[3] as f64) / 2.0,
+        );
+        let dist = |t: &Truth| {
+            t.centre
+                .map_or(f64::INFINITY, |(u, v)| (u - cu).powi(2) + (v - cv).powi(2))
+        };
+        let Some(t) = truths
+            .iter()
+            .filter(|t| t.class_id == inst.class_id)
+            .min_by(|a, b| dist(a).total_cmp(&dist(b)))
+        else {
+            continue;
+        };
+        if t.visible < cfg.min_visible || inst.distinct_points(n) < cfg.min_points {
+            continue;
+        }
+        let mut crop: Vec<f32> = ws
+            .crops
+            .slice(ndarray::s![i, .., .., ..])
+            .iter()
+            .copied()
+            .collect();
+        let mut points: Vec<f32> = ws
+            .points
+            .slice(ndarray::s![i, .., ..])
+            .iter()
+            .copied()
+            .collect();
+        let choose: Vec<u32> = ws.choose.row(i).to_vec();
+        let mut pose = t.pose;
+        if cfg.augment {
+            for c in 0..3 {
+                let gain: f32 = rng.random_range(0.8..1.2);
+                let bias: f32 = rng.random_range(-0.2..0.2);
+                for v in &mut crop[c * s * s..(c + 1) * s * s] {
+                    *v = *v * gain + bias;
+                }
+            }
+            let shift = Vector3::new(
+                rng.random_range(-0.02..0.02),
+                rng.random_range(-0.02..0.02),
+                rng.random_range(-0.02..0.02),
+            );
+            for p in points.chunks_exact_mut(3) {
+                for j in 0..3 {
+                    p[j] += shift[j] as f32 + 0.001 * gauss(&mut rng);
+                }
+            }
+            pose = Translation3::from(shift) * pose;
+        }
+        out.push(Sample {
+            crop,
+            points,
+            choose,
+            class: inst.class_id as usize - 1,
+            pose,
+        });
+    }
+    Ok(out)
+}
+
+/// Workspace for the generator: the network's N and S, every class of the set.
+pub fn workspace(set: &ObjectSet, cfg: &DataConfig) -> anyhow::Result<Workspace> {
+    Workspace::new(WorkspaceConfig {
+        max_instances: 16,
+        num_points: cfg.num_points,
+        crop_size: cfg.crop_size,
+        num_classes: set.len() as u16,
+        ..WorkspaceConfig::default()
+    })
+    .map_err(|e| anyhow::anyhow!("workspace: {e}"))
+}
+
+/// A background generator thread feeding a bounded channel.
+pub struct Stream {
+    pub rx: Receiver<Sample>,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<anyhow::Result<()>>>,
+}
+
+impl Stream {
+    /// Produces samples until dropped: rendered scenes `first_seed, first_seed + 1, …`,
+    /// or the BOP training frames in a fresh seeded shuffle per pass.
+    pub fn spawn(
+        set: Arc<ObjectSet>,
+        cfg: DataConfig,
+        source: Source,
+        first_seed: u64,
+        capacity: usize,
+    ) -> Self {
+        let (tx, rx) = bounded(capacity);
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop2 = stop.clone();
+        let handle = std::thread::Builder::new()
+            .name("fusepose-data".into())
+            .spawn(move || -> anyhow::Result<()> {
+                let mut ws = workspace(&set, &cfg)?;
+                let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
+                let mut seed = first_seed;
+                let mut order: Vec<usize> = match &source {
+                    Source::Bop(ds) => bop_indices(ds, false),
+                    Source::Rendered => Vec::new(),
+                };
+                let mut rng = Pcg64::seed_from_u64(first_seed);
+                let mut next = order.len();
+                while !stop2.load(Ordering::Relaxed) {
+                    let samples = match &source {
+                        Source::Rendered => frame_samples(&set, &cfg, seed, &mut ws, &mut target)?,
+                        Source::Bop(ds) => {
+                            if order.is_empty() {
+                                anyhow::bail!("the BOP dataset has no training frames");
+                            }
+                            if next >= order.len() {
+                                order.shuffle(&mut rng);
+                                next = 0;
+                            }
+                            next += 1;
+                            bop_frame_samples(ds, order[next - 1], &cfg, seed, &mut ws)?
+                        }
+                    };
+                    for s in samples {
+                        if tx.send(s).is_err() {
+                            return Ok(());
+                        }
+                    }
+                    seed += 1;
+                }
+                Ok(())
+            })
+            .expect("spawning the data thread");
+        Self {
+            rx,
+            stop,
+            handle: Some(handle),
+        }
+    }
+
+    /// Whether the generator thread has died (its error, if any).
+    pub fn check(&mut self) -> anyhow::Result<()> {
+        if self.handle.as_ref().is_some_and(|h| h.is_finished())
+            && let Some(h) = self.handle.take()
+        {
+            return match h.join() {
+                Ok(r) => r.context("data thread"),
+                Err(_) => Err(anyhow::anyhow!("data thread panicked")),
+            };
+        }
+        Ok(())
+    }
+}
+
+impl Drop for Stream {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        // Unblock a pending send by draining, then let the thread exit on its own.
+        while self.rx.try_recv().is_ok() {}
+    }
+}

@@ -1,0 +1,165 @@
+//! Segmentation samples rendered on the fly: a tabletop scene from
+//! `scene::sampler`, rendered with sensor noise and a class label map, turned
+//! into the network input by the engine's own [`FrameMap`] (so training and
+//! inference see identical inputs), with the class at each output cell's
+//! centre as the target. Training augmentation: per-channel colour gain and
+//! bias plus a global brightness shift on the normalised colour, and a
+//! horizontal flip of the full-resolution frame (input and target stay
+//! aligned). A background thread fills a bounded channel.
+
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::thread::JoinHandle;
+
+use anyhow::Context;
+use crossbeam::channel::{Receiver, bounded};
+use fusepose_estimator::seg::{FrameMap, SegConfig};
+use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
+use fusepose_scene::render::{NoiseConfig, RenderTarget};
+use fusepose_scene::sampler::{LabelKind, SamplerConfig, SamplerError, render_view_labelled, sample_scene};
+use fusepose_scene::{Intrinsics, ObjectSet};
+use rand::{Rng, SeedableRng};
+use rand_pcg::Pcg64;
+
+/// One rendered frame as the segmenter sees it.
+#[derive(Clone, Debug)]
+pub struct SegSample {
+    /// `[4, H0, W0]` network input.
+    pub input: Vec<f32>,
+    /// `[H1 * W1]` class id per output cell (0 = background).
+    pub target: Vec<u16>,
+}
+
+/// Renders scene `seed` (class labels, sensor noise) into `target`; `None` when
+/// the sampler could not place the objects (the seed is skipped).
+pub fn render_frame(set: &ObjectSet, seed: u64, target: &mut RenderTarget) -> anyhow::Result<Option<Intrinsics>> {
+    let k = Intrinsics::YCB_VIDEO;
+    let scene = match sample_scene(set, &SamplerConfig::default(), seed) {
+        Ok(s) => s,
+        Err(SamplerError::Placement { .. }) => return Ok(None),
+        Err(e) => return Err(e).context("sampling a scene"),
+    };
+    render_view_labelled(&scene, set, 0, &k, &NoiseConfig::default(), LabelKind::Class, target)
+        .context("rendering a scene")?;
+    Ok(Some(k))
+}
+
+/// A rendered frame (in `target`) as a borrowed view without labels.
+pub fn frame_view(k: Intrinsics, target: &RenderTarget) -> FrameView<'_> {
+    FrameView {
+        intrinsics: k,
+        color_format: ColorFormat::Rgb8,
+        color: target.rgb(),
+        depth: DepthPlane::F32(target.depth_m()),
+        labels: None,
+    }
+}
+
+/// Renders scene `seed` and returns its sample (augmented when `augment`).
+pub fn frame_sample(
+    set: &ObjectSet,
+    cfg: &SegConfig,
+    seed: u64,
+    augment: bool,
+    target: &mut RenderTarget,
+) -> anyhow::Result<Option<SegSample>> {
+    let Some(k) = render_frame(set, seed, target)? else { return Ok(None) };
+    let mut rng = Pcg64::seed_from_u64(seed ^ 0xa46_5e9);
+    let (w, h) = (k.width as usize, k.height as usize);
+    let map = FrameMap::new(w, h, cfg);
+    let mut input = vec![0.0; map.input_len()];
+    let mut cells = vec![0u16; map.cells()];
+    if augment && rng.random_bool(0.5) {
+        // Horizontal flip of the full-resolution frame, so input and target stay aligned exactly.
+        let mut color = target.rgb().to_vec();
+        let mut depth = target.depth_m().to_vec();
+        let mut labels = target.labels().to_vec();
+        for row in color.chunks_exact_mut(3 * w) {
+            row.reverse();
+            for px in row.chunks_exact_mut(3) {
+                px.reverse();
+            }
+        }
+        depth.chunks_exact_mut(w).for_each(<[f32]>::reverse);
+        labels.chunks_exact_mut(w).for_each(<[u16]>::reverse);
+        let frame = FrameView { color: &color, depth: DepthPlane::F32(&depth), ..frame_view(k, target) };
+        map.fill_input(&frame, &mut input);
+        map.target(|i| labels.get(i).copied().unwrap_or(0), &mut cells);
+    } else {
+        map.fill_input(&frame_view(k, target), &mut input);
+        let labels = target.labels();
+        map.target(|i| labels.get(i).copied().unwrap_or(0), &mut cells);
+    }
+    let mut s = SegSample { input, target: cells };
+    if augment {
+        jitter_colour(&mut s, cfg, &mut rng);
+    }
+    Ok(Some(s))
+}
+
+/// Colour jitter on the normalised colour channels: per-channel gain and bias
+/// plus a global brightness shift.
+pub fn jitter_colour(s: &mut SegSample, cfg: &SegConfig, rng: &mut Pcg64) {
+    let plane = cfg.input_height * cfg.input_width;
+    let brightness: f32 = rng.random_range(-0.3..0.3);
+    for c in 0..3 {
+        let gain: f32 = rng.random_range(0.8..1.2);
+        let bias: f32 = rng.random_range(-0.15..0.15) + brightness;
+        for v in &mut s.input[c * plane..(c + 1) * plane] {
+            *v = *v * gain + bias;
+        }
+    }
+}
+
+/// A background generator thread feeding a bounded channel.
+pub struct SegStream {
+    pub rx: Receiver<SegSample>,
+    stop: Arc<AtomicBool>,
+    handle: Option<JoinHandle<anyhow::Result<()>>>,
+}
+
+impl SegStream {
+    /// Renders scenes `first_seed, first_seed + 1, …` (augmented) until dropped.
+    pub fn spawn(set: Arc<ObjectSet>, cfg: SegConfig, first_seed: u64, capacity: usize) -> anyhow::Result<Self> {
+        let (tx, rx) = bounded(capacity);
+        let stop = Arc::new(AtomicBool::new(false));
+        let stop2 = stop.clone();
+        let handle = std::thread::Builder::new()
+            .name("fusepose-seg-data".into())
+            .spawn(move || -> anyhow::Result<()> {
+                let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
+                let mut seed = first_seed;
+                while !stop2.load(Ordering::Relaxed) {
+                    if let Some(s) = frame_sample(&set, &cfg, seed, true, &mut target)?
+                        && tx.send(s).is_err()
+                    {
+                        return Ok(());
+                    }
+                    seed += 1;
+                }
+                Ok(())
+            })
+            .context("spawning the data thread")?;
+        Ok(Self { rx, stop, handle: Some(handle) })
+    }
+
+    /// The generator thread's error, if it has died.
+    pub fn check(&mut self) -> anyhow::Result<()> {
+        if self.handle.as_ref().is_some_and(|h| h.is_finished())
+            && let Some(h) = self.handle.take()
+        {
+            return match h.join() {
+                Ok(r) => r.context("data thread"),
+                Err(_) => Err(anyhow::anyhow!("data thread panicked")),
+            };
+        }
+        Ok(())
+    }
+}
+
+impl Drop for SegStream {
+    fn drop(&mut self) {
+        self.stop.store(true, Ordering::Relaxed);
+        while self.rx.try_recv().is_ok() {}
+    }
+}

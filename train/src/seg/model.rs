@@ -1,0 +1,59 @@
+//! The segmenter in burn. Field names are the weight file's tensor names
+//! (`e1.weight`, `head.bias`, …) and the architecture is fixed by
+//! [`SegConfig`]; the inference engine (`fusepose_estimator::seg::engine`)
+//! mirrors [`SegNet::forward`] operation for operation.
+
+use burn::module::Module;
+use burn::nn::PaddingConfig2d;
+use burn::nn::conv::{Conv2d, Conv2dConfig};
+use burn::prelude::{Device, Tensor};
+use burn::tensor::activation::relu;
+use burn::tensor::module::interpolate;
+use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
+use fusepose_estimator::seg::SegConfig;
+
+fn conv(i: usize, o: usize, k: usize, stride: usize, device: &Device) -> Conv2d {
+    let pad = k / 2;
+    Conv2dConfig::new([i, o], [k, k])
+        .with_stride([stride, stride])
+        .with_padding(PaddingConfig2d::Explicit(pad, pad, pad, pad))
+        .init(device)
+}
+
+/// Encoder `e1..e4` (stride 2), decoder `d3, d2, d1` over `cat(up(prev), skip)`, 1x1 `head`.
+#[derive(Module, Debug)]
+pub struct SegNet {
+    pub e1: Conv2d,
+    pub e2: Conv2d,
+    pub e3: Conv2d,
+    pub e4: Conv2d,
+    pub d3: Conv2d,
+    pub d2: Conv2d,
+    pub d1: Conv2d,
+    pub head: Conv2d,
+}
+
+fn up(x: Tensor<4>, like: &Tensor<4>) -> Tensor<4> {
+    let [_, _, h, w] = like.dims();
+    interpolate(x, InterpolateOptions::new(InterpolateMode::Nearest).with_output_size([h, w]))
+}
+
+impl SegNet {
+    pub fn new(c: &SegConfig, device: &Device) -> Self {
+        let mut layers = c.layers().into_iter().map(|(_, i, o, k, s)| conv(i, o, k, s, device));
+        let mut next = || layers.next().expect("SegConfig::layers has eight layers");
+        Self { e1: next(), e2: next(), e3: next(), e4: next(), d3: next(), d2: next(), d1: next(), head: next() }
+    }
+
+    /// `x [B, 4, H0, W0]` → logits `[B, K+1, H1, W1]` (half resolution).
+    pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        let e1 = relu(self.e1.forward(x));
+        let e2 = relu(self.e2.forward(e1.clone()));
+        let e3 = relu(self.e3.forward(e2.clone()));
+        let e4 = relu(self.e4.forward(e3.clone()));
+        let d3 = relu(self.d3.forward(Tensor::cat(vec![up(e4, &e3), e3], 1)));
+        let d2 = relu(self.d2.forward(Tensor::cat(vec![up(d3, &e2), e2], 1)));
+        let d1 = relu(self.d1.forward(Tensor::cat(vec![up(d2, &e1), e1], 1)));
+        self.head.forward(d1)
+    }
+}

@@ -1,0 +1,199 @@
+//! Parity: the segmenter inference engine (`fusepose_estimator::seg`) and the
+//! burn forward pass give the same logits for the same weights and input,
+//! within 1e-4 of the largest logit magnitude — for the default 160x120 input
+//! and an odd size whose nearest upsampling ratios are not integers. Also: the
+//! engine's labels are the argmax of burn's logits, and loading refuses files
+//! that do not fit the object set or are not segmenter files.
+
+use burn::prelude::{Device, Tensor, TensorData};
+use fusepose_estimator::net::NetLoadError;
+use fusepose_estimator::net::meta::{TrainRecord, object_entries};
+use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
+use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
+use fusepose_scene::builtin::builtin_objects;
+use fusepose_scene::{Intrinsics, ObjectSet};
+use fusepose_train::seg::model::SegNet;
+use fusepose_train::seg::store;
+use rand::{Rng, SeedableRng};
+
+/// A scratch directory removed on drop.
+struct Scratch(std::path::PathBuf);
+
+impl Scratch {
+    fn new(name: &str) -> Self {
+        let d = std::env::temp_dir().join(format!("fusepose-seg-parity-{}-{name}", std::process::id()));
+        std::fs::create_dir_all(&d).unwrap();
+        Self(d)
+    }
+    fn path(&self) -> &std::path::Path {
+        &self.0
+    }
+}
+
+impl Drop for Scratch {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+fn three_objects() -> ObjectSet {
+    ObjectSet { objects: builtin_objects().objects.into_iter().take(3).collect() }
+}
+
+fn save_random(cfg: &SegConfig, set: &ObjectSet, path: &std::path::Path) -> SegNet {
+    let net = SegNet::new(cfg, &Device::flex());
+    store::save(&net, cfg, &object_entries(set), &TrainRecord::default(), &serde_json::json!({}), path).unwrap();
+    net
+}
+
+fn burn_logits(net: &SegNet, cfg: &SegConfig, input: &[f32]) -> Vec<f32> {
+    let x = Tensor::<4>::from_data(
+        TensorData::new(input.to_vec(), [1, 4, cfg.input_height, cfg.input_width]),
+        &Device::flex(),
+    );
+    let y = net.forward(x);
+    let (h1, w1) = cfg.output_size();
+    assert_eq!(y.dims(), [1, cfg.outputs(), h1, w1]);
+    y.into_data().try_to_vec::<f32>().unwrap()
+}
+
+fn random_input(cfg: &SegConfig, seed: u64) -> Vec<f32> {
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(seed);
+    let plane = cfg.input_width * cfg.input_height;
+    (0..4 * plane)
+        .map(|i| if i >= 3 * plane { rng.random_range(0.0..2.0) } else { rng.random_range(-2.0..2.0) })
+        .collect()
+}
+
+fn assert_close(engine: &[f32], burn: &[f32]) {
+    assert_eq!(engine.len(), burn.len());
+    let scale = burn.iter().fold(0.0f32, |m, v| m.max(v.abs())).max(1e-6);
+    let err = engine.iter().zip(burn).fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+    eprintln!("logits: max abs diff {err:.3e}, scale {scale:.3e}");
+    assert!(err <= 1e-4 * scale, "max |diff| {err} vs scale {scale}");
+    assert!(scale > 1e-3, "logits are all ~0: the test would prove nothing");
+}
+
+#[test]
+fn engine_logits_match_burn_forward() {
+    let set = three_objects();
+    let dir = Scratch::new("logits");
+    let mut odd = SegConfig::new(3);
+    (odd.input_width, odd.input_height) = (150, 110);
+    odd.enc = [8, 16, 24, 40];
+    odd.dec = [24, 12, 8];
+    for (i, cfg) in [SegConfig::new(3), odd].into_iter().enumerate() {
+        let path = dir.path().join(format!("seg{i}.safetensors"));
+        let net = save_random(&cfg, &set, &path);
+        let mut engine = SegEngine::load(&path, &set).unwrap();
+        assert_eq!(engine.config(), &cfg);
+        for seed in [1u64, 2] {
+            let input = random_input(&cfg, seed + 10 * i as u64);
+            let expect = burn_logits(&net, &cfg, &input);
+            let got = engine.forward(&input).unwrap().to_vec();
+            assert_close(&got, &expect);
+        }
+        let wrong = vec![0.0; 7];
+        assert!(engine.forward(&wrong).is_err());
+    }
+}
+
+#[test]
+fn segment_labels_are_argmax_of_burn_logits() {
+    let set = three_objects();
+    let cfg = SegConfig::new(3);
+    let dir = Scratch::new("argmax");
+    let path = dir.path().join("seg.safetensors");
+    let net = save_random(&cfg, &set, &path);
+    let mut engine = SegEngine::load(&path, &set).unwrap();
+    // A 640x480 frame with smooth structure so the logits vary across cells.
+    let (w, h) = (640usize, 480usize);
+    let color: Vec<u8> =
+        (0..w * h).flat_map(|p| [(p % w / 3) as u8, (p / w / 2) as u8, ((p % w + p / w) / 5) as u8]).collect();
+    let depth: Vec<f32> = (0..w * h).map(|p| if p % 97 == 0 { 0.0 } else { 0.5 + (p % w) as f32 / 640.0 }).collect();
+    let k = Intrinsics::YCB_VIDEO;
+    let frame = FrameView { intrinsics: k, color_format: ColorFormat::Rgb8, color: &color, depth: DepthPlane::F32(&depth), labels: None };
+    let mut labels = vec![u16::MAX; w * h];
+    engine.segment(&frame, &mut labels).unwrap();
+    // The engine's input is what the trainer feeds burn; its argmax is the labels.
+    let map = fusepose_estimator::seg::FrameMap::new(w, h, &cfg);
+    let mut input = vec![0.0; map.input_len()];
+    map.fill_input(&frame, &mut input);
+    let logits = burn_logits(&net, &cfg, &input);
+    let cells = map.cells();
+    let mut checked = 0;
+    for (i, &got) in engine.cell_labels().iter().enumerate() {
+        let mut v: Vec<(f32, usize)> = (0..cfg.outputs()).map(|c| (logits[c * cells + i], c)).collect();
+        v.sort_by(|a, b| b.0.total_cmp(&a.0));
+        if v[0].0 - v[1].0 > 1e-3 {
+            assert_eq!(got as usize, v[0].1, "cell {i}");
+            checked += 1;
+        }
+    }
+    assert!(checked > cells / 2, "only {checked} of {cells} cells had a clear argmax");
+    // Every frame pixel carries its cell's label (8x8 blocks at 640x480 → 80x60 cells).
+    let (_, w1) = cfg.output_size();
+    for (p, &l) in labels.iter().enumerate() {
+        let (u, v) = (p % w, p / w);
+        assert_eq!(l, engine.cell_labels()[(v / 8) * w1 + u / 8]);
+    }
+    // Wrong output length and an invalid frame are errors, not panics.
+    assert!(engine.segment(&frame, &mut labels[..10]).is_err());
+    let bad = FrameView { color: &color[..30], ..frame };
+    assert!(engine.segment(&bad, &mut labels).is_err());
+}
+
+#[test]
+fn load_refuses_files_that_do_not_fit() {
+    let set = three_objects();
+    let cfg = SegConfig::new(3);
+    let dir = Scratch::new("refuse");
+    let path = dir.path().join("seg.safetensors");
+    save_random(&cfg, &set, &path);
+    // Different order of the same objects.
+    let mut swapped = three_objects();
+    swapped.objects.swap(0, 1);
+    assert!(matches!(SegEngine::load(&path, &swapped), Err(NetLoadError::ObjectMismatch { class: 1, what: "name", .. })));
+    // Fewer objects.
+    let two = ObjectSet { objects: set.objects[..2].to_vec() };
+    assert!(matches!(SegEngine::load(&path, &two), Err(NetLoadError::ObjectCount { file: 3, set: 2 })));
+    // Truncated file.
+    let bytes = std::fs::read(&path).unwrap();
+    assert!(matches!(SegFile::from_bytes(&bytes[..bytes.len() / 2]), Err(NetLoadError::Format(_))));
+    // Missing file.
+    assert!(matches!(SegEngine::load(&dir.path().join("nope.safetensors"), &set), Err(NetLoadError::Io { .. })));
+}
+
+/// A short smoke training run (not part of the normal suite):
+/// `FUSEPOSE_SEG_MINUTES=2.5 nice -n 10 cargo test -p fusepose-train --test seg_parity -- --ignored --nocapture`
+/// Writes `/work/scratch/seg/smoke.safetensors` (or `$FUSEPOSE_SEG_OUT`; resumes from
+/// `$FUSEPOSE_SEG_RESUME` when set) and
+/// checks that the loss fell and the held-out mIoU is above zero.
+#[test]
+#[ignore]
+fn smoke_training() {
+    use fusepose_train::seg::{SegTrainConfig, train_segmenter};
+    let env = |k: &str| std::env::var(k).ok();
+    let out = std::path::PathBuf::from(env("FUSEPOSE_SEG_OUT").unwrap_or("/work/scratch/seg/smoke.safetensors".into()));
+    let dir = out.parent().unwrap().to_path_buf();
+    let minutes: f64 = env("FUSEPOSE_SEG_MINUTES").and_then(|m| m.parse().ok()).unwrap_or(2.5);
+    let cfg = SegTrainConfig {
+        out: out.clone(),
+        minutes: Some(minutes),
+        resume: env("FUSEPOSE_SEG_RESUME").map(std::path::PathBuf::from),
+        checkpoint_dir: dir.join("ckpt"),
+        log: Some(dir.join("smoke.log")),
+        weight_frames: 16,
+        val_frames: 16,
+        progress: false,
+        ..SegTrainConfig::default()
+    };
+    let r = train_segmenter(cfg).unwrap();
+    println!("steps {} frames {} | loss first10 {:.4} last10 {:.4} | {:.0} ms/step", r.record.steps, r.record.samples, r.first_loss, r.last_loss, r.step_ms);
+    println!("class weights {:?}", r.class_weights);
+    println!("curve {:?}", r.loss_curve);
+    println!("{}", r.validation.summary());
+    assert!(r.last_loss < r.first_loss, "loss did not fall");
+    assert!(r.validation.miou > 0.0);
+    assert!(SegEngine::load(&out, &fusepose_scene::builtin::builtin_objects()).is_ok());
+}
