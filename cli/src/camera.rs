@@ -15,9 +15,10 @@ use fusepose_client::{
 /// Where the label plane comes from.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Labels {
-    /// Ground-truth class ids (the estimator segments nothing itself yet).
+    /// Ground-truth class ids.
     Gt,
-    /// No label plane.
+    /// No label plane: the daemon segments with the built-in segmenter when
+    /// its weight file has one (`estimator.masks = "auto"`).
     None,
 }
 
@@ -32,7 +33,7 @@ pub struct Args {
     /// Render scenes of the built-in objects on the fly instead of replaying.
     #[arg(long)]
     pub synthetic: bool,
-    /// Frames per second (the renderer may be slower; then as fast as it renders).
+    /// Frame rate, frames per second (the renderer may be slower; then as fast as it renders).
     #[arg(long, default_value_t = 24.0)]
     pub fps: f64,
     /// Start over at the end of the dataset.
@@ -44,12 +45,17 @@ pub struct Args {
     /// Most frames to preload from the dataset / to send (default: all / forever).
     #[arg(long)]
     pub frames: Option<usize>,
-    /// First scene seed (synthetic).
+    /// First scene seed (synthetic): scene i of the run uses seed + i.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
     /// Camera views rendered per synthetic scene.
     #[arg(long, default_value_t = 8)]
     pub views_per_scene: usize,
+    /// Synthetic: render this many frames before sending, then replay them in
+    /// a loop (0 = render every frame live). Keeps --fps when rendering is
+    /// slower; costs about 2.2 MB of memory per 640x480 frame.
+    #[arg(long, default_value_t = 0, value_name = "FRAMES")]
+    pub preload: usize,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -154,13 +160,44 @@ fn replay_bop(ipc: &Ipc, args: &Args, dir: &Path) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The sampler of `--synthetic`: default tabletop scenes, `views_per_scene` camera views each.
+pub fn synthetic_sampler(views_per_scene: usize) -> fusepose_scene::sampler::SamplerConfig {
+    fusepose_scene::sampler::SamplerConfig { views: views_per_scene.max(1), ..Default::default() }
+}
+
+/// Which scene seed and view `--synthetic` renders as frame `sequence` (frames
+/// go scene by scene from `--seed`, every view of a scene in order; with
+/// `--preload N` the first N frames repeat), so a consumer can recompute the
+/// ground truth of any frame it receives.
+pub fn synthetic_frame_of(first_seed: u64, views_per_scene: usize, preload: usize, sequence: u64) -> (u64, usize) {
+    let index = if preload > 0 { sequence % preload as u64 } else { sequence };
+    let views = views_per_scene.max(1) as u64;
+    (first_seed.wrapping_add(index / views), (index % views) as usize)
+}
+
+/// Copies one rendered frame into a loaned sample and sends it.
+fn send_rendered(producer: &mut Producer, k: &fusepose_scene::Intrinsics, rgb: &[u8], depth: &[u16], labels: &[u16]) -> anyhow::Result<()> {
+    let mut w = producer.loan()?;
+    w.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+    let planes = w.planes_mut();
+    planes.color.copy_from_slice(rgb);
+    if let DepthMut::U16(plane) = planes.depth {
+        plane.copy_from_slice(depth);
+    }
+    if let Some(LabelsMut::U16(plane)) = planes.labels {
+        plane.copy_from_slice(labels);
+    }
+    w.send()?;
+    Ok(())
+}
+
 fn synthetic(ipc: &Ipc, args: &Args) -> anyhow::Result<()> {
     use fusepose_scene::render::{NoiseConfig, RenderTarget};
-    use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
+    use fusepose_scene::sampler::{LabelKind, render_view_labelled, sample_scene};
 
     let objects = fusepose_scene::builtin::builtin_objects();
     let k = fusepose_scene::Intrinsics::YCB_VIDEO;
-    let sampler = SamplerConfig { views: args.views_per_scene.max(1), ..SamplerConfig::default() };
+    let sampler = synthetic_sampler(args.views_per_scene);
     let noise = NoiseConfig::default();
     let mut target = RenderTarget::for_intrinsics(&k);
     let layout = FrameLayout {
@@ -177,31 +214,43 @@ fn synthetic(ipc: &Ipc, args: &Args) -> anyhow::Result<()> {
     let t0 = Instant::now();
     let mut progress = Progress::new();
     let mut sent = 0u64;
-    let mut seed = args.seed;
-    'scenes: loop {
-        let scene = sample_scene(&objects, &sampler, seed).map_err(|e| anyhow::anyhow!("scene {seed}: {e}"))?;
-        for view in 0..scene.views.len() {
-            if sent >= limit {
-                break 'scenes;
-            }
-            render_view_labelled(&scene, &objects, view, &k, &noise, LabelKind::Class, &mut target)
-                .map_err(|e| anyhow::anyhow!("scene {seed} view {view}: {e}"))?;
+    let mut scene: Option<(u64, fusepose_scene::sampler::Scene)> = None;
+    let mut render = |index: u64, target: &mut RenderTarget| -> anyhow::Result<()> {
+        let (seed, view) = synthetic_frame_of(args.seed, args.views_per_scene, 0, index);
+        if scene.as_ref().is_none_or(|(s, _)| *s != seed) {
+            let sampled = sample_scene(&objects, &sampler, seed).map_err(|e| anyhow::anyhow!("scene {seed}: {e}"))?;
+            scene = Some((seed, sampled));
+        }
+        let Some((_, scene)) = scene.as_ref() else { unreachable!("sampled above") };
+        render_view_labelled(scene, &objects, view, &k, &noise, LabelKind::Class, target)
+            .map_err(|e| anyhow::anyhow!("scene {seed} view {view}: {e}"))?;
+        Ok(())
+    };
+    if args.preload > 0 {
+        tracing::info!(frames = args.preload, "pre-rendering");
+        let mut frames = Vec::with_capacity(args.preload);
+        for i in 0..args.preload as u64 {
+            render(i, &mut target)?;
+            frames.push((target.rgb().to_vec(), target.depth_u16().to_vec(), target.labels().to_vec()));
+        }
+        tracing::info!(seconds = t0.elapsed().as_secs_f64(), "pre-rendered; replaying in a loop");
+        let t0 = Instant::now();
+        progress = Progress::new(); // rate of sending, not of pre-rendering
+        while sent < limit {
+            let (rgb, depth, labels) = &frames[(sent % frames.len() as u64) as usize];
             pace(t0, sent, period);
-            let mut w = producer.loan()?;
-            w.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
-            let planes = w.planes_mut();
-            planes.color.copy_from_slice(target.rgb());
-            if let DepthMut::U16(depth) = planes.depth {
-                depth.copy_from_slice(target.depth_u16());
-            }
-            if let Some(LabelsMut::U16(labels)) = planes.labels {
-                labels.copy_from_slice(target.labels());
-            }
-            w.send()?;
+            send_rendered(&mut producer, &k, rgb, depth, labels)?;
             progress.tick(&args.name);
             sent += 1;
         }
-        seed += 1;
+    } else {
+        while sent < limit {
+            render(sent, &mut target)?;
+            pace(t0, sent, period);
+            send_rendered(&mut producer, &k, target.rgb(), target.depth_u16(), target.labels())?;
+            progress.tick(&args.name);
+            sent += 1;
+        }
     }
     tracing::info!(sent, "synthetic camera finished");
     Ok(())

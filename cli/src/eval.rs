@@ -10,8 +10,14 @@
 //! Timing covers `Workspace::prepare` + `Estimator::estimate` per frame (not
 //! image decoding); time per object is the frame time divided by the
 //! instances estimated in it.
+//!
+//! Masks: `--masks gt` uses the dataset's ground-truth class labels, `--masks
+//! net` the built-in segmenter's ([`masks`]); `--masks gt,net` evaluates
+//! every estimator with both on the same frames. `--overlay DIR` writes one
+//! PNG per frame (labels tinted, poses drawn).
 
 mod dataset;
+mod masks;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -28,6 +34,7 @@ use fusepose_scene::{ObjectSet, Pose};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use dataset::{EvalDataset, EvalFrame, GtObject};
+use masks::NetMasks;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum EstimatorKind {
@@ -52,6 +59,15 @@ pub enum MaskSource {
     Net,
 }
 
+impl MaskSource {
+    fn name(self) -> &'static str {
+        match self {
+            MaskSource::Gt => "gt",
+            MaskSource::Net => "net",
+        }
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Dataset: a BOP root or split folder, or a YCB-Video root.
@@ -66,9 +82,20 @@ pub struct Args {
     /// Evaluate several estimators on the same frames (e.g. `icp,net`); overrides --estimator.
     #[arg(long, value_enum, value_delimiter = ',')]
     pub compare: Vec<EstimatorKind>,
-    /// Where instance masks come from.
-    #[arg(long, value_enum, default_value_t = MaskSource::Gt)]
-    pub masks: MaskSource,
+    /// Where instance masks come from; `gt,net` evaluates with both.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "gt")]
+    pub masks: Vec<MaskSource>,
+    /// Segmenter for `--masks net` (default: the one embedded in --weights).
+    #[arg(long)]
+    pub seg_weights: Option<PathBuf>,
+    /// `--masks net`: same-class regions smaller than this many segmenter output cells
+    /// become background (default: the engine's, 6).
+    #[arg(long)]
+    pub seg_min_cells: Option<usize>,
+    /// Write one PNG per frame here: labels tinted (the segmenter's with `--masks net`),
+    /// the poses of the last estimator drawn.
+    #[arg(long)]
+    pub overlay: Option<PathBuf>,
     /// Object set: `builtin` or a mesh folder (default: the one the dataset names, else builtin).
     #[arg(long)]
     pub objects: Option<String>,
@@ -96,19 +123,28 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if args.masks == MaskSource::Net {
-        bail!("--masks net: the segmentation network is not available in this build yet; use --masks gt");
-    }
     let mut data = EvalDataset::open(&args.dataset, &args.split)?;
     let source = args.objects.clone().or_else(|| data.object_source()).unwrap_or_else(|| "builtin".into());
     let objects = fusepose_scene::mesh_io::load_object_set(&source, args.mesh_scale)
         .with_context(|| format!("loading object set `{source}`"))?;
     data.bind(&objects)?;
     let kinds = if args.compare.is_empty() { vec![args.estimator] } else { args.compare.clone() };
+    let mut mask_sources = args.masks.clone();
+    mask_sources.dedup();
     let mut runners = kinds
         .iter()
-        .map(|&k| Runner::new(k, &objects, &args))
+        .flat_map(|&k| mask_sources.iter().map(move |&m| (k, m)))
+        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &args))
         .collect::<anyhow::Result<Vec<_>>>()?;
+    let mut net_masks = match mask_sources.contains(&MaskSource::Net) {
+        false => None,
+        true => {
+            let weights = args.seg_weights.as_ref().or(args.weights.as_ref()).context(
+                "--masks net needs --weights FILE with an embedded segmenter (or --seg-weights FILE)",
+            )?;
+            Some(NetMasks::load(weights, &objects, args.seg_min_cells)?)
+        }
+    };
     let metrics = objects
         .objects
         .iter()
@@ -123,21 +159,45 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar())
             .progress_chars("=> "),
     );
-    bar.set_prefix(kinds.iter().map(|k| k.name()).collect::<Vec<_>>().join(","));
+    bar.set_prefix(runners.iter().map(|r| r.name.clone()).collect::<Vec<_>>().join(","));
     for index in 0..frames {
         let frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
+        if let Some(seg) = &mut net_masks {
+            seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
+        }
         for runner in &mut runners {
-            runner.evaluate(&frame, index as u64, &metrics)?;
+            let labels = match (runner.masks, &net_masks) {
+                (MaskSource::Net, Some(seg)) => &seg.labels,
+                _ => &frame.labels,
+            };
+            runner.evaluate(&frame, labels, index as u64, &metrics)?;
+        }
+        if let (Some(dir), Some(last)) = (&args.overlay, runners.last()) {
+            let labels = match (last.masks, &net_masks) {
+                (MaskSource::Net, Some(seg)) => &seg.labels,
+                _ => &frame.labels,
+            };
+            let poses: Vec<(u16, Pose)> = last.poses.as_slice().iter().map(|p| (p.class_id, pose_of(p))).collect();
+            let path = dir.join(format!("{:06}_{:06}.png", frame.scene_id, frame.im_id));
+            crate::pose_overlay::write(&path, &frame.intrinsics, &frame.rgb, Some(labels), &poses, &objects)?;
         }
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if let Some(dir) = &args.overlay {
+        println!("wrote {frames} overlays to {}", dir.display());
+    }
 
     let name = args.dataset.display().to_string();
     let mut summaries = serde_json::Map::new();
+    if let Some(seg) = &net_masks {
+        let (median, p99) = (percentile(&seg.ms, 0.5), percentile(&seg.ms, 0.99));
+        seg.print(median, p99);
+        summaries.insert("segmenter".to_string(), seg.summary(median, p99));
+    }
     for runner in &mut runners {
         runner.print(&name, frames);
-        summaries.insert(runner.kind.name().to_string(), runner.summary());
+        summaries.insert(runner.name.clone(), runner.summary());
         if let Some(csv) = runner.csv.take() {
             csv.finish().context("writing BOP results CSV")?;
         }
@@ -161,6 +221,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 /// One estimator under evaluation with its buffers and accumulated results.
 struct Runner {
     kind: EstimatorKind,
+    masks: MaskSource,
+    /// `icp`, or `icp/net-masks` when several mask sources are evaluated.
+    name: String,
     estimator: Box<dyn Estimator>,
     workspace: Workspace,
     poses: PoseSet,
@@ -173,7 +236,9 @@ struct Runner {
 }
 
 impl Runner {
-    fn new(kind: EstimatorKind, objects: &ObjectSet, args: &Args) -> anyhow::Result<Self> {
+    fn new(kind: EstimatorKind, masks: MaskSource, several_masks: bool, objects: &ObjectSet, args: &Args) -> anyhow::Result<Self> {
+        let name =
+            if several_masks { format!("{}/{}-masks", kind.name(), masks.name()) } else { kind.name().to_string() };
         let num_classes = u16::try_from(objects.len()).context("more than 65535 objects")?;
         let (estimator, config): (Box<dyn Estimator>, WorkspaceConfig) = match kind {
             EstimatorKind::Icp => (
@@ -194,12 +259,15 @@ impl Runner {
         let csv = match &args.csv {
             None => None,
             Some(path) => {
-                let path = if args.compare.len() > 1 { suffixed(path, kind.name()) } else { path.clone() };
+                let several = args.compare.len() > 1 || several_masks;
+                let path = if several { suffixed(path, &name.replace('/', "_")) } else { path.clone() };
                 Some(BopResultsWriter::create(&path).with_context(|| format!("creating {}", path.display()))?)
             }
         };
         Ok(Self {
             kind,
+            masks,
+            name,
             estimator,
             poses: PoseSet::with_capacity(config.max_instances),
             workspace,
@@ -211,13 +279,14 @@ impl Runner {
         })
     }
 
-    fn evaluate(&mut self, frame: &EvalFrame, seed: u64, metrics: &[ObjectMetric]) -> anyhow::Result<()> {
+    /// Estimates `frame` with instance masks from `labels` (class ids, one per pixel) and scores it.
+    fn evaluate(&mut self, frame: &EvalFrame, labels: &[u16], seed: u64, metrics: &[ObjectMetric]) -> anyhow::Result<()> {
         let view = FrameView {
             intrinsics: frame.intrinsics,
             color_format: ColorFormat::Rgb8,
             color: &frame.rgb,
             depth: DepthPlane::U16 { data: &frame.depth, scale: frame.depth_unit_m as f32 },
-            labels: Some(LabelPlane::U16(&frame.labels)),
+            labels: Some(LabelPlane::U16(labels)),
         };
         let start = Instant::now();
         let prepared = self.workspace.prepare(&view, seed);
@@ -260,7 +329,7 @@ impl Runner {
     }
 
     fn print(&self, dataset: &str, frames: usize) {
-        println!("\n{} on {dataset}: {frames} frames, {} ground-truth objects", self.kind.name(), self.table.overall().count);
+        println!("\n{} on {dataset}: {frames} frames, {} ground-truth objects", self.name, self.table.overall().count);
         print!("{}", self.table);
         let (fm, fp) = (percentile(&self.frame_ms, 0.5), percentile(&self.frame_ms, 0.99));
         let (om, op) = (percentile(&self.object_ms, 0.5), percentile(&self.object_ms, 0.99));
@@ -291,7 +360,7 @@ impl Runner {
         }
         let per_object: serde_json::Map<String, serde_json::Value> =
             self.table.rows().iter().map(|r| (r.name.clone(), row(r))).collect();
-        serde_json::json!({ "estimator": self.kind.name(), "overall": overall, "per_object": per_object })
+        serde_json::json!({ "estimator": self.kind.name(), "masks": self.masks.name(), "overall": overall, "per_object": per_object })
     }
 }
 
@@ -350,7 +419,7 @@ fn write_plot(runners: &[Runner], path: &Path) -> anyhow::Result<()> {
             curves.extend(r.table.add_s_curves().into_iter().filter(|(_, e)| !e.is_empty()));
             curves.push(("ALL".to_string(), all));
         } else {
-            curves.push((format!("{} ALL", r.kind.name()), all));
+            curves.push((format!("{} ALL", r.name), all));
         }
     }
     let borrowed: Vec<(&str, Vec<f64>)> = curves.iter().map(|(n, e)| (n.as_str(), e.clone())).collect();

@@ -7,6 +7,7 @@ mod camera;
 mod demo;
 mod eval;
 mod objects;
+mod pose_overlay;
 mod render;
 mod stats;
 mod train;
@@ -40,6 +41,12 @@ enum Command {
     Eval(eval::Args),
     /// Run daemon, synthetic camera and consumer together and show live results.
     Demo(demo::Args),
+    /// (internal) The demo's daemon process.
+    #[command(name = "demo-daemon", hide = true)]
+    DemoDaemon(demo::DaemonArgs),
+    /// (internal) The demo's consumer process.
+    #[command(name = "demo-consumer", hide = true)]
+    DemoConsumer(demo::ConsumerArgs),
 }
 
 fn main() {
@@ -49,6 +56,8 @@ fn main() {
                 .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
         )
         .with_writer(std::io::stderr)
+        // No colour codes in log files (e.g. the demo's logs/*.log).
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
@@ -60,6 +69,8 @@ fn main() {
         Command::Train(a) => train::run(a),
         Command::Eval(a) => eval::run(a),
         Command::Demo(a) => demo::run(a),
+        Command::DemoDaemon(a) => demo::run_daemon(a),
+        Command::DemoConsumer(a) => demo::run_consumer(a),
     };
     if let Err(e) = result {
         eprintln!("error: {e:#}");

@@ -1,6 +1,9 @@
 //! `fusepose train`: trains the fusion network (pose net + integrated refiner)
 //! on scenes rendered on the fly and writes a safetensors weight file that
-//! `fuseposed` loads. See docs/TRAINING.md.
+//! `fuseposed` loads; `--stage seg` trains the built-in segmenter instead
+//! ([`seg`]). See docs/TRAINING.md.
+
+mod seg;
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -13,9 +16,14 @@ use fusepose_train::trainer::{Stage, TrainOptions, train, validate_file};
 
 #[derive(Clone, Copy, Debug, clap::ValueEnum)]
 pub enum StageArg {
+    /// The pose network only.
     Pose,
+    /// The refiner only (colour features frozen).
     Refine,
+    /// Pose network and refiner together (their losses summed).
     Both,
+    /// The built-in instance segmenter (its own weights; see `--out`).
+    Seg,
 }
 
 #[derive(clap::Args, Debug)]
@@ -30,7 +38,8 @@ pub struct Args {
     /// instead of rendering: frames with index % 10 != 0 train, the others validate.
     #[arg(long)]
     pub dataset: Option<PathBuf>,
-    /// Output weight file.
+    /// Output weight file. With `--stage seg`: a pose-network file here gets the
+    /// segmenter embedded (objects must match), any other path a segmenter-only file.
     #[arg(long, default_value = "models/builtin.safetensors")]
     pub out: PathBuf,
     /// Training wall-time budget in minutes.
@@ -42,10 +51,13 @@ pub struct Args {
     /// Continue from a checkpoint or a shipped weight file.
     #[arg(long)]
     pub resume: Option<PathBuf>,
+    /// What to train.
     #[arg(long, value_enum, default_value = "both")]
     pub stage: StageArg,
+    /// Rendered frames per optimisation step.
     #[arg(long, default_value_t = 8)]
     pub batch: usize,
+    /// Seed of the training scenes and of the weight initialisation.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
     /// Peak Adam learning rate (cosine decay to a tenth over the budget).
@@ -60,17 +72,19 @@ pub struct Args {
     /// Append a plain-text log here.
     #[arg(long)]
     pub log: Option<PathBuf>,
-    /// Validation scenes (held-out seeds) and the most instances scored.
+    /// Validation scenes (held-out seeds).
     #[arg(long, default_value_t = 120)]
     pub val_frames: usize,
+    /// Most object instances scored per validation.
     #[arg(long, default_value_t = 400)]
     pub val_samples: usize,
     /// Only validate the weight file given with --resume; no training.
     #[arg(long)]
     pub validate_only: bool,
-    /// Points per instance and crop side for a fresh run.
+    /// Points sampled per instance, for a fresh run (default 256; a resumed file keeps its own).
     #[arg(long)]
     pub points: Option<usize>,
+    /// Colour crop side in pixels, for a fresh run (default 64; a resumed file keeps its own).
     #[arg(long)]
     pub crop: Option<usize>,
     /// Only time the inference engine (weights from --resume, else random) and exit.
@@ -79,11 +93,20 @@ pub struct Args {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// `--stage seg`: network input size `WxH` of a fresh run (default 160x120).
+    #[arg(long)]
+    pub seg_size: Option<String>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let set = load_object_set(&args.objects, args.scale)
         .with_context(|| format!("loading object set '{}'", args.objects))?;
+    let stage = match args.stage {
+        StageArg::Pose => Stage::Pose,
+        StageArg::Refine => Stage::Refine,
+        StageArg::Both => Stage::Both,
+        StageArg::Seg => return seg::run(set, &args),
+    };
     if args.bench_engine {
         return bench(&set, args.resume.as_deref());
     }
@@ -115,11 +138,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         minutes: args.minutes,
         steps: args.steps,
         resume: args.resume,
-        stage: match args.stage {
-            StageArg::Pose => Stage::Pose,
-            StageArg::Refine => Stage::Refine,
-            StageArg::Both => Stage::Both,
-        },
+        stage,
         batch: args.batch,
         seed: args.seed,
         lr: args.lr,

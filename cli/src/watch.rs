@@ -3,6 +3,9 @@
 //!
 //! Names are those of the built-in object set (`class <id>` beyond it).
 //! The iceoryx2 namespace comes from `FUSEPOSE_IOX2_ROOT` / `FUSEPOSE_IOX2_PREFIX`.
+//! `--overlay DIR` also writes a PNG per answered frame ([`overlay`]).
+
+mod overlay;
 
 use std::time::{Duration, Instant};
 
@@ -22,6 +25,12 @@ pub struct Args {
     /// Exit after this many seconds without a message (default: wait forever).
     #[arg(long)]
     pub idle_timeout_s: Option<f64>,
+    /// Write `frame_<sequence>.png` here per answered frame: frame, labels, poses drawn.
+    #[arg(long)]
+    pub overlay: Option<std::path::PathBuf>,
+    /// With --overlay: network file with an embedded segmenter, to show labels of frames that carry none.
+    #[arg(long)]
+    pub weights: Option<std::path::PathBuf>,
 }
 
 fn object_name(class_id: u16) -> String {
@@ -137,6 +146,20 @@ fn json(msg: &PoseMessage) -> String {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("fusepose-watch"))?;
     let mut consumer = Consumer::open(&ipc, &args.name)?;
+    // With --overlay: a frame subscriber next to the daemon's, and the writer keeping recent frames.
+    let mut overlay = match &args.overlay {
+        Some(dir) => {
+            let services = fusepose_client::CameraServices::open(&ipc, &args.name)?;
+            let frames = services
+                .frames
+                .subscriber_builder()
+                .create()
+                .map_err(|e| anyhow::anyhow!("camera {}: cannot subscribe to frames: {e:?}", args.name))?;
+            let objects = fusepose_scene::builtin::builtin_objects();
+            Some((frames, overlay::OverlayWriter::new(dir, objects, args.weights.as_deref())?))
+        }
+        None => None,
+    };
     let idle = args.idle_timeout_s.map(Duration::from_secs_f64);
     let mut last = Instant::now();
     let mut seen = 0u64;
@@ -146,6 +169,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 last = Instant::now();
                 seen += 1;
                 println!("{}", if args.json { json(&msg) } else { text(&msg) });
+                if let Some((frames, writer)) = &mut overlay {
+                    while let Some(sample) =
+                        frames.receive().map_err(|e| anyhow::anyhow!("receiving a frame: {e:?}"))?
+                    {
+                        writer.push(*sample.user_header(), sample.payload());
+                    }
+                    match writer.write(&msg) {
+                        Ok(Some(path)) => eprintln!("wrote {}", path.display()),
+                        Ok(None) => eprintln!("frame {} no longer held; no overlay", msg.frame_sequence),
+                        Err(e) => eprintln!("overlay of frame {}: {e:#}", msg.frame_sequence),
+                    }
+                }
             }
             None => {
                 if idle.is_some_and(|d| last.elapsed() >= d) {

@@ -1,4 +1,8 @@
 //! The robot side: wait for pose messages; and the stats query client.
+//!
+//! Waiting follows a [`WaitStrategy`] (default: block until shortly before
+//! the next message is due, then poll; see [`crate::arrival`]), through
+//! [`wait_for_samples`], which any iceoryx2 subscriber + listener pair can use.
 
 use std::time::{Duration, Instant};
 
@@ -7,14 +11,60 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
+use crate::arrival::{ArrivalPredictor, WaitPlan, WaitStrategy};
 use crate::services::CameraServices;
-use crate::{ClientError, Ipc, PoseMessage, StatsRequest, StatsSnapshot, WIRE_VERSION};
+use crate::{ClientError, Ipc, PoseMessage, StatsRequest, StatsSnapshot, WIRE_VERSION, monotonic_ns};
+
+/// Blocks until `has_samples` says true (returns true) or `timeout` passes
+/// (false), waiting on `listener` as `strategy` and `predictor` plan; records
+/// each arrival in `predictor`. Pending wake-ups of `listener` are consumed.
+pub fn wait_for_samples<E: std::fmt::Debug>(
+    listener: &Listener<ipc::Service>,
+    mut has_samples: impl FnMut() -> Result<bool, E>,
+    predictor: &mut ArrivalPredictor,
+    strategy: WaitStrategy,
+    timeout: Duration,
+) -> Result<bool, (&'static str, String)> {
+    let deadline = monotonic_ns().saturating_add(timeout.as_nanos() as u64);
+    let mut check = || has_samples().map_err(|e| ("receive", format!("{e:?}")));
+    loop {
+        // Consume pending wake-ups first so the next wait really blocks.
+        let _ = listener.try_wait(|_| {});
+        if check()? {
+            predictor.observe(monotonic_ns());
+            return Ok(true);
+        }
+        let now = monotonic_ns();
+        if now >= deadline {
+            return Ok(false);
+        }
+        let block_until = match predictor.plan(strategy, now) {
+            WaitPlan::Block => deadline,
+            WaitPlan::BlockUntil(t) => t.min(deadline),
+            WaitPlan::SpinUntil(t) => {
+                let until = t.min(deadline);
+                while monotonic_ns() < until {
+                    if check()? {
+                        predictor.observe(monotonic_ns());
+                        return Ok(true);
+                    }
+                    std::hint::spin_loop();
+                }
+                continue;
+            }
+        };
+        let wait = Duration::from_nanos(block_until.saturating_sub(now));
+        listener.timed_wait(|_| {}, wait).map_err(|e| ("wait", format!("{e:?}")))?;
+    }
+}
 
 /// Receives the pose messages of one camera.
 pub struct Consumer {
     services: CameraServices,
     subscriber: Subscriber<ipc::Service, PoseMessage, ()>,
     listener: Listener<ipc::Service>,
+    strategy: WaitStrategy,
+    predictor: ArrivalPredictor,
 }
 
 impl Consumer {
@@ -31,7 +81,17 @@ impl Consumer {
             port: "listener",
             detail: format!("{e:?}"),
         })?;
-        Ok(Self { services, subscriber, listener })
+        Ok(Self { services, subscriber, listener, strategy: WaitStrategy::DEFAULT_SPIN, predictor: ArrivalPredictor::default() })
+    }
+
+    /// How [`Consumer::wait`] and [`Consumer::wait_ready`] wait (default [`WaitStrategy::DEFAULT_SPIN`]).
+    pub fn set_wait_strategy(&mut self, strategy: WaitStrategy) {
+        self.strategy = strategy;
+    }
+
+    /// The pose-message period learned so far, ns.
+    pub fn learned_period_ns(&self) -> Option<u64> {
+        self.predictor.period_ns()
     }
 
     /// The listener woken on every pose message, to attach to a caller's WaitSet.
@@ -84,25 +144,11 @@ impl Consumer {
 
     /// Blocks until at least one pose message is waiting (true) or `timeout` passes (false);
     /// takes nothing (use [`Consumer::latest`] or [`Consumer::drain`]).
-    pub fn wait_ready(&self, timeout: Duration) -> Result<bool, ClientError> {
-        let deadline = Instant::now() + timeout;
-        let transfer = |operation, detail: String| ClientError::Transfer {
-            service: self.services.poses_name.clone(),
-            operation,
-            detail,
-        };
-        loop {
-            // Consume pending wake-ups first so the next wait really blocks.
-            let _ = self.listener.try_wait(|_| {});
-            if self.subscriber.has_samples().map_err(|e| transfer("receive", format!("{e:?}")))? {
-                return Ok(true);
-            }
-            let now = Instant::now();
-            if now >= deadline {
-                return Ok(false);
-            }
-            self.listener.timed_wait(|_| {}, deadline - now).map_err(|e| transfer("wait", format!("{e:?}")))?;
-        }
+    pub fn wait_ready(&mut self, timeout: Duration) -> Result<bool, ClientError> {
+        let subscriber = &self.subscriber;
+        wait_for_samples(&self.listener, || subscriber.has_samples(), &mut self.predictor, self.strategy, timeout).map_err(
+            |(operation, detail)| ClientError::Transfer { service: self.services.poses_name.clone(), operation, detail },
+        )
     }
 }
 

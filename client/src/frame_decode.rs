@@ -2,7 +2,9 @@
 //! length is checked against the payload slice before any plane is borrowed.
 //! Never reads outside the slice, never panics, never allocates.
 
-use crate::frame_header::{ColorFormat, DepthFormat, FRAME_MAGIC, FrameHeader, LabelFormat, MAX_IMAGE_SIDE, PlaneRef};
+use crate::frame_header::{
+    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE, PlaneRef,
+};
 use crate::InvalidReason;
 
 /// Depth values borrowed from the payload.
@@ -45,8 +47,10 @@ pub enum FrameRejection {
     BadSize { width: u32, height: u32 },
     #[error("unknown {plane} format code {code}")]
     UnknownFormat { plane: &'static str, code: u8 },
-    #[error("intrinsics invalid: {0}")]
-    BadIntrinsics(&'static str),
+    #[error("focal length fx={fx}, fy={fy} is not a finite number of pixels in {:?}", FOCAL_RANGE_PX)]
+    BadFocalLength { fx: f64, fy: f64 },
+    #[error("principal point ({cx}, {cy}) is not finite or lies outside [-0.5, 1.5] x the image size")]
+    BadPrincipalPoint { cx: f64, cy: f64 },
     #[error("depth scale {0} is not a positive finite number")]
     BadDepthScale(f32),
     #[error("{plane} plane [{offset}, +{len}) lies outside the {payload_len}-byte payload")]
@@ -59,6 +63,10 @@ pub enum FrameRejection {
     PlaneOverlap { a: &'static str, b: &'static str },
     #[error("frame says camera id {got:#010x}, this service belongs to {expected:#010x}")]
     WrongCamera { got: u32, expected: u32 },
+    #[error("payload has {got} bytes, the header's plane layout needs {expected}")]
+    PayloadTruncated { got: usize, expected: u64 },
+    #[error("has_labels = 1 but the label plane is empty")]
+    LabelsMissing,
 }
 
 impl FrameRejection {
@@ -69,13 +77,16 @@ impl FrameRejection {
             Self::HeaderSize { .. } => InvalidReason::HeaderSize,
             Self::BadSize { .. } => InvalidReason::BadSize,
             Self::UnknownFormat { .. } => InvalidReason::UnknownFormat,
-            Self::BadIntrinsics(_) => InvalidReason::BadIntrinsics,
+            Self::BadFocalLength { .. } => InvalidReason::BadFocalLength,
+            Self::BadPrincipalPoint { .. } => InvalidReason::BadPrincipalPoint,
             Self::BadDepthScale(_) => InvalidReason::BadDepthScale,
             Self::PlaneOutOfBounds { .. } => InvalidReason::PlaneOutOfBounds,
             Self::PlaneLength { .. } => InvalidReason::PlaneLength,
             Self::PlaneMisaligned { .. } => InvalidReason::PlaneMisaligned,
             Self::PlaneOverlap { .. } => InvalidReason::PlaneOverlap,
             Self::WrongCamera { .. } => InvalidReason::WrongCamera,
+            Self::PayloadTruncated { .. } => InvalidReason::PayloadTruncated,
+            Self::LabelsMissing => InvalidReason::LabelsMissing,
         }
     }
 }
@@ -151,15 +162,36 @@ pub fn decode_frame<'a>(
         ),
         flag => return Err(FrameRejection::UnknownFormat { plane: "label flag", code: flag }),
     };
-    if !(h.fx.is_finite() && h.fx > 0.0 && h.fy.is_finite() && h.fy > 0.0) {
-        return Err(FrameRejection::BadIntrinsics("fx and fy must be positive and finite"));
+    // RangeInclusive::contains is false for NaN.
+    if !(FOCAL_RANGE_PX.contains(&h.fx) && FOCAL_RANGE_PX.contains(&h.fy)) {
+        return Err(FrameRejection::BadFocalLength { fx: h.fx, fy: h.fy });
     }
     let (w, hgt) = (h.width as f64, h.height as f64);
     if !(h.cx.is_finite() && h.cx >= -0.5 * w && h.cx <= 1.5 * w && h.cy.is_finite() && h.cy >= -0.5 * hgt && h.cy <= 1.5 * hgt) {
-        return Err(FrameRejection::BadIntrinsics("principal point must be finite and within [-0.5, 1.5] x the image size"));
+        return Err(FrameRejection::BadPrincipalPoint { cx: h.cx, cy: h.cy });
     }
     if !(h.depth_scale.is_finite() && h.depth_scale > 0.0) {
         return Err(FrameRejection::BadDepthScale(h.depth_scale));
+    }
+    if label_format.is_some() && h.labels.len == 0 {
+        return Err(FrameRejection::LabelsMissing);
+    }
+    // A header with the standard layout (what `Producer` writes) over a short
+    // payload is a truncated frame; other layouts fall to the per-plane checks.
+    let standard = FrameLayout {
+        width: h.width,
+        height: h.height,
+        color_format,
+        depth_format,
+        depth_scale: h.depth_scale,
+        labels: label_format,
+    };
+    let [color, depth, labels] = standard.planes();
+    if h.color == color && h.depth == depth && (label_format.is_none() || h.labels == labels) {
+        let expected = standard.payload_len() as u64;
+        if (payload.len() as u64) < expected {
+            return Err(FrameRejection::PayloadTruncated { got: payload.len(), expected });
+        }
     }
 
     let pixels = h.width as u64 * h.height as u64; // <= 4096², no overflow
@@ -239,9 +271,17 @@ mod tests {
             (FrameHeader { color_format: 9, ..good }, InvalidReason::UnknownFormat),
             (FrameHeader { depth_format: 0, ..good }, InvalidReason::UnknownFormat),
             (FrameHeader { has_labels: 2, ..good }, InvalidReason::UnknownFormat),
-            (FrameHeader { fx: f64::NAN, ..good }, InvalidReason::BadIntrinsics),
-            (FrameHeader { fy: -1.0, ..good }, InvalidReason::BadIntrinsics),
-            (FrameHeader { cx: f64::INFINITY, ..good }, InvalidReason::BadIntrinsics),
+            (FrameHeader { fx: f64::NAN, ..good }, InvalidReason::BadFocalLength),
+            (FrameHeader { fy: -1.0, ..good }, InvalidReason::BadFocalLength),
+            (FrameHeader { fx: 0.0, ..good }, InvalidReason::BadFocalLength),
+            (FrameHeader { fy: f64::INFINITY, ..good }, InvalidReason::BadFocalLength),
+            // Positive and finite but absurd: points would land at infinity.
+            (FrameHeader { fx: 1e-300, ..good }, InvalidReason::BadFocalLength),
+            (FrameHeader { fy: 0.5, ..good }, InvalidReason::BadFocalLength),
+            (FrameHeader { fx: 2.0e6, ..good }, InvalidReason::BadFocalLength),
+            (FrameHeader { cx: f64::INFINITY, ..good }, InvalidReason::BadPrincipalPoint),
+            (FrameHeader { cy: -100.0, ..good }, InvalidReason::BadPrincipalPoint),
+            (FrameHeader { labels: PlaneRef::default(), ..good }, InvalidReason::LabelsMissing),
             (FrameHeader { depth_scale: 0.0, ..good }, InvalidReason::BadDepthScale),
             (FrameHeader { color: PlaneRef { offset: u64::MAX, len: 45 }, ..good }, InvalidReason::PlaneOutOfBounds),
             (FrameHeader { color: PlaneRef { offset: 0, len: u64::MAX }, ..good }, InvalidReason::PlaneOutOfBounds),
@@ -255,9 +295,13 @@ mod tests {
             let got = decode_frame(&header, bytes, Some(7)).map(|_| ()).unwrap_err();
             assert_eq!(got.reason(), reason, "{header:?} gave {got}");
         }
-        // A truncated payload: the label plane no longer fits.
+        // A truncated payload under the standard layout: the label plane no longer fits.
         let got = decode_frame(&good, &bytes[..bytes.len() - 1], Some(7)).map(|_| ()).unwrap_err();
-        assert_eq!(got.reason(), InvalidReason::PlaneOutOfBounds);
+        assert_eq!(got, FrameRejection::PayloadTruncated { got: bytes.len() - 1, expected: bytes.len() as u64 });
+        // The focal range ends are accepted.
+        for f in [1.0, 1.0e6] {
+            assert!(decode_frame(&FrameHeader { fx: f, fy: f, ..good }, bytes, Some(7)).is_ok(), "{f}");
+        }
     }
 
     #[test]

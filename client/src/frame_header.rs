@@ -12,6 +12,11 @@ pub const FRAME_MAGIC: u32 = u32::from_le_bytes(*b"FPFR");
 /// Largest accepted image side, pixels.
 pub const MAX_IMAGE_SIDE: u32 = 4096;
 
+/// Accepted focal lengths fx, fy, pixels. Real lenses on images up to
+/// [`MAX_IMAGE_SIDE`] lie far inside; values outside (e.g. 1e-300) put
+/// back-projected points at infinity and make every pose non-finite.
+pub const FOCAL_RANGE_PX: core::ops::RangeInclusive<f64> = 1.0..=1.0e6;
+
 /// Byte order of the colour plane: 3 bytes per pixel, row-major.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ColorFormat {

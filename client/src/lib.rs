@@ -10,6 +10,7 @@
 //! Units: metres, nanoseconds of `CLOCK_MONOTONIC` ([`monotonic_ns`]), camera
 //! optical frame (x right, y down, z forward), quaternions `[x, y, z, w]`.
 
+pub mod arrival;
 mod clock;
 mod consumer;
 mod error;
@@ -22,11 +23,12 @@ mod services;
 mod stats;
 
 pub use clock::monotonic_ns;
-pub use consumer::{Consumer, StatsClient};
+pub use arrival::{ArrivalPredictor, WaitPlan, WaitStrategy};
+pub use consumer::{Consumer, StatsClient, wait_for_samples};
 pub use error::ClientError;
 pub use frame_decode::{DepthData, FramePlanes, FrameRejection, LabelData, decode_frame};
 pub use frame_header::{
-    ColorFormat, DepthFormat, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE, PlaneRef,
+    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE, PlaneRef,
 };
 pub use ipc_context::{Ipc, IpcOptions};
 pub use pose_message::{InvalidReason, MAX_OBJECTS, PoseMessage, PoseStatus, WireObjectPose};
@@ -36,4 +38,4 @@ pub use stats::{LatencySummary, STAGE_COUNT, Stage, StatsRequest, StatsSnapshot,
 
 /// Version of every wire type in this crate. Bumped on any layout change;
 /// checked in each message and as a service attribute when opening services.
-pub const WIRE_VERSION: u16 = 1;
+pub const WIRE_VERSION: u16 = 2;

@@ -41,13 +41,19 @@ impl PoseStatus {
     pub const INVALID_FRAME: u32 = 1 << 1;
     /// Published later than the configured deadline after capture.
     pub const DEADLINE_MISSED: u32 = 1 << 2;
-    /// Results are usable but reduced (more instances than fit, an estimator error on some objects).
+    /// Results are usable but reduced (more instances than fit, an estimator error on some objects,
+    /// or fewer refiner iterations / points than configured to meet the deadline; see each object's
+    /// `refine_iterations`).
     pub const DEGRADED: u32 = 1 << 3;
-    /// The estimator failed on this frame (no objects).
+    /// The estimator failed on this frame (no objects), or returned a
+    /// non-finite pose (dropped; see `StatsSnapshot::poses_non_finite`).
     pub const ESTIMATOR_FAILED: u32 = 1 << 4;
 }
 
 /// Why a frame was rejected (wire code in [`PoseMessage::invalid_reason`], index in stats).
+///
+/// Codes are never reused or renumbered; new reasons are appended (and bump
+/// [`crate::WIRE_VERSION`], since the stats array grows).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
 pub enum InvalidReason {
     None = 0,
@@ -56,7 +62,8 @@ pub enum InvalidReason {
     HeaderSize = 3,
     BadSize = 4,
     UnknownFormat = 5,
-    BadIntrinsics = 6,
+    /// fx or fy zero, negative, NaN, infinite or outside the sane pixel range.
+    BadFocalLength = 6,
     BadDepthScale = 7,
     PlaneOutOfBounds = 8,
     PlaneLength = 9,
@@ -64,11 +71,29 @@ pub enum InvalidReason {
     PlaneOverlap = 11,
     WrongCamera = 12,
     EstimatorRefused = 13,
+    /// cx or cy non-finite or far outside the image.
+    BadPrincipalPoint = 14,
+    /// The header describes the standard plane layout but the payload ends before it.
+    PayloadTruncated = 15,
+    /// `has_labels = 1` but the label plane is empty.
+    LabelsMissing = 16,
+    /// Not one depth reading in the frame (all zero).
+    DepthEmpty = 17,
+    /// Not one depth reading in the frame, NaN/infinite values among them (f32 depth).
+    DepthNonFinite = 18,
+    /// A label id larger than the daemon's number of object classes.
+    LabelOutOfRange = 19,
+    /// Sequence number not larger than the previous one from the same publisher.
+    SequenceRegression = 20,
+    /// Capture time later than the daemon's clock.
+    CaptureInFuture = 21,
+    /// Capture time too far in the past to be worth a pose.
+    CaptureTooOld = 22,
 }
 
 impl InvalidReason {
     /// Number of codes (size of per-reason counters).
-    pub const COUNT: usize = 14;
+    pub const COUNT: usize = 23;
 
     pub const ALL: [InvalidReason; Self::COUNT] = [
         Self::None,
@@ -77,7 +102,7 @@ impl InvalidReason {
         Self::HeaderSize,
         Self::BadSize,
         Self::UnknownFormat,
-        Self::BadIntrinsics,
+        Self::BadFocalLength,
         Self::BadDepthScale,
         Self::PlaneOutOfBounds,
         Self::PlaneLength,
@@ -85,6 +110,15 @@ impl InvalidReason {
         Self::PlaneOverlap,
         Self::WrongCamera,
         Self::EstimatorRefused,
+        Self::BadPrincipalPoint,
+        Self::PayloadTruncated,
+        Self::LabelsMissing,
+        Self::DepthEmpty,
+        Self::DepthNonFinite,
+        Self::LabelOutOfRange,
+        Self::SequenceRegression,
+        Self::CaptureInFuture,
+        Self::CaptureTooOld,
     ];
 
     pub fn from_code(code: u32) -> Option<Self> {
@@ -100,7 +134,7 @@ impl InvalidReason {
             Self::HeaderSize => "header_size",
             Self::BadSize => "bad_size",
             Self::UnknownFormat => "unknown_format",
-            Self::BadIntrinsics => "bad_intrinsics",
+            Self::BadFocalLength => "bad_focal_length",
             Self::BadDepthScale => "bad_depth_scale",
             Self::PlaneOutOfBounds => "plane_out_of_bounds",
             Self::PlaneLength => "plane_length",
@@ -108,6 +142,15 @@ impl InvalidReason {
             Self::PlaneOverlap => "plane_overlap",
             Self::WrongCamera => "wrong_camera",
             Self::EstimatorRefused => "estimator_refused",
+            Self::BadPrincipalPoint => "bad_principal_point",
+            Self::PayloadTruncated => "payload_truncated",
+            Self::LabelsMissing => "labels_missing",
+            Self::DepthEmpty => "depth_empty",
+            Self::DepthNonFinite => "depth_non_finite",
+            Self::LabelOutOfRange => "label_out_of_range",
+            Self::SequenceRegression => "sequence_regression",
+            Self::CaptureInFuture => "capture_in_future",
+            Self::CaptureTooOld => "capture_too_old",
         }
     }
 }
@@ -193,6 +236,10 @@ mod tests {
             assert_eq!(InvalidReason::from_code(r as u32), Some(r));
         }
         assert_eq!(InvalidReason::from_code(99), None);
+        let mut names: Vec<&str> = InvalidReason::ALL.iter().map(|r| r.name()).collect();
+        names.sort();
+        names.dedup();
+        assert_eq!(names.len(), InvalidReason::COUNT, "reason names must be distinct");
     }
 
     #[test]

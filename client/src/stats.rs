@@ -105,6 +105,11 @@ pub struct StatsSnapshot {
     pub deadline_misses: u64,
     /// Frames where the estimator failed.
     pub estimator_failures: u64,
+    /// Object poses the estimator returned with a NaN/infinite value, dropped
+    /// instead of published.
+    pub poses_non_finite: u64,
+    /// Times a frame came from a new publisher (producer restarted).
+    pub producer_restarts: u64,
     /// Per [`Stage`] then end-to-end, since the daemon started.
     pub since_start: [LatencySummary; TIMELINE_COUNT],
     /// Per [`Stage`] then end-to-end, over `window_ns`.
@@ -128,6 +133,8 @@ impl Default for StatsSnapshot {
             invalid_by_reason: [0; InvalidReason::COUNT],
             deadline_misses: 0,
             estimator_failures: 0,
+            poses_non_finite: 0,
+            producer_restarts: 0,
             since_start: [LatencySummary::default(); TIMELINE_COUNT],
             last_window: [LatencySummary::default(); TIMELINE_COUNT],
         }

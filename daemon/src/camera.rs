@@ -5,7 +5,7 @@ use fusepose_client::{
     CameraServices, FRAME_MAGIC, FrameHeader, InvalidReason, Ipc, MAX_OBJECTS, PoseMessage, PoseStatus, STAGE_COUNT,
     Stage, StatsRequest, StatsSnapshot, WireObjectPose, decode_frame, monotonic_ns,
 };
-use fusepose_estimator::ObjectPose;
+use fusepose_estimator::{FrameError, ObjectPose};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
 use iceoryx2::port::publisher::Publisher;
@@ -20,6 +20,14 @@ use crate::latency::{END_TO_END, LatencyBook};
 use crate::rate_limited_log::RateLimit;
 
 const LOG_INTERVAL_NS: u64 = 1_000_000_000;
+
+/// How far a frame's capture time may lie ahead of the daemon's clock. Both
+/// read the same CLOCK_MONOTONIC, so any real frame is behind; more than this
+/// means the producer stamps with another clock (e.g. wall time).
+pub const MAX_CAPTURE_AHEAD_NS: u64 = 1_000_000;
+/// Oldest capture time still processed: a pose of an older frame is no use to
+/// a controller (the daemon was stalled, or the producer stamps 0 / another clock).
+pub const MAX_CAPTURE_AGE_NS: u64 = 2_000_000_000;
 
 /// The ports of one camera, owned by the loop thread (iceoryx2 ipc ports are not Send).
 pub struct CameraPorts {
@@ -57,10 +65,13 @@ pub struct CameraState {
     invalid_log: RateLimit,
     transport_log: RateLimit,
     estimator_log: RateLimit,
+    /// Largest label id producers may send (the object set's classes; 0 = any).
+    label_classes: u16,
 }
 
 fn wire_pose(p: &ObjectPose) -> WireObjectPose {
     let q = p.rotation.as_ref().coords; // [x, y, z, w]
+    debug_assert!(pose_is_finite(p));
     WireObjectPose {
         class_id: p.class_id,
         instance_id: p.instance_id,
@@ -74,8 +85,39 @@ fn wire_pose(p: &ObjectPose) -> WireObjectPose {
     }
 }
 
+/// Whether every number a pose puts on the wire is finite.
+fn pose_is_finite(p: &ObjectPose) -> bool {
+    p.rotation.as_ref().coords.iter().all(|v| v.is_finite())
+        && p.translation.iter().all(|v| v.is_finite())
+        && p.confidence.is_finite()
+}
+
+/// The stats reason of a frame-content refusal (the rest are the estimator's own).
+fn content_reason(e: &FrameError) -> InvalidReason {
+    match e {
+        FrameError::DepthEmpty => InvalidReason::DepthEmpty,
+        FrameError::DepthNonFinite { .. } => InvalidReason::DepthNonFinite,
+        FrameError::LabelOutOfRange { .. } => InvalidReason::LabelOutOfRange,
+        _ => InvalidReason::EstimatorRefused,
+    }
+}
+
+/// Refuses a capture time ahead of `received_ns` or older than [`MAX_CAPTURE_AGE_NS`].
+fn check_capture_time(capture_ns: u64, received_ns: u64) -> Result<(), (InvalidReason, String)> {
+    if capture_ns > received_ns.saturating_add(MAX_CAPTURE_AHEAD_NS) {
+        let ahead = (capture_ns - received_ns) as f64 / 1e6;
+        return Err((InvalidReason::CaptureInFuture, format!("capture time {ahead:.3} ms ahead of the daemon's clock")));
+    }
+    let age = received_ns.saturating_sub(capture_ns);
+    if age > MAX_CAPTURE_AGE_NS {
+        return Err((InvalidReason::CaptureTooOld, format!("capture time {:.3} s old", age as f64 / 1e9)));
+    }
+    Ok(())
+}
+
 impl CameraState {
     pub fn new(name: &str, engine: PoseEngine, deadline_ns: u64, now_ns: u64) -> Self {
+        let label_classes = engine.label_classes();
         Self {
             name: name.to_owned(),
             camera_id: fusepose_client::camera_id(name),
@@ -88,6 +130,7 @@ impl CameraState {
             invalid_log: RateLimit::new(LOG_INTERVAL_NS),
             transport_log: RateLimit::new(LOG_INTERVAL_NS),
             estimator_log: RateLimit::new(LOG_INTERVAL_NS),
+            label_classes,
         }
     }
 
@@ -95,24 +138,28 @@ impl CameraState {
     /// and publishes its pose message. Returns whether a frame was processed.
     pub fn process_newest(&mut self, ports: &CameraPorts) -> bool {
         let mut newest = None;
+        let mut newest_sequence = SequenceEvent::InOrder;
         loop {
             match ports.frames.receive() {
                 Ok(Some(sample)) => {
                     self.counters.received += 1;
                     let header = sample.user_header();
+                    let mut event = SequenceEvent::InOrder;
                     if header.magic == FRAME_MAGIC {
-                        match self.sequence.observe(header.sequence) {
-                            SequenceEvent::InOrder => {}
+                        event = self.sequence.observe(sample.header().publisher_id().value(), header.sequence);
+                        match event {
+                            SequenceEvent::InOrder | SequenceEvent::Regression { .. } => {}
                             SequenceEvent::Gap { missed } => self.counters.missed_sequence += missed,
                             SequenceEvent::Restart => {
                                 self.counters.producer_restarts += 1;
-                                tracing::info!(camera = %self.name, sequence = header.sequence, "frame sequence restarted (producer restarted)");
+                                tracing::info!(camera = %self.name, sequence = header.sequence, "frames from a new publisher (producer restarted)");
                             }
                         }
                     }
                     if newest.replace(sample).is_some() {
                         self.counters.skipped_stale += 1;
                     }
+                    newest_sequence = event;
                 }
                 Ok(None) => break,
                 Err(e) => {
@@ -142,45 +189,86 @@ impl CameraState {
             }
             Ok(planes) => {
                 let view = to_frame_view(&planes);
+                let checked = self.check_stream(newest_sequence, &header, received_ns).and_then(|()| {
+                    view.check_content(self.label_classes).map(|_| ()).map_err(|e| (content_reason(&e), e.to_string()))
+                });
                 times[Stage::Ingest as usize] = monotonic_ns() - received_ns;
-                // A panic inside the estimator on odd input must not take the daemon down.
-                let engine = &mut self.engine;
-                let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
-                    engine.run(&view, header.sequence, &mut times)
-                }))
-                .unwrap_or(Err(EngineFailure::Panicked));
-                match outcome {
-                    Ok(()) => {
-                        valid = true;
-                        msg.status = PoseStatus::OK;
-                        let poses = self.engine.poses();
-                        let n = poses.len().min(MAX_OBJECTS);
-                        for (slot, pose) in msg.objects.iter_mut().zip(&poses[..n]) {
-                            *slot = wire_pose(pose);
-                        }
-                        msg.object_count = n as u16;
-                        if poses.len() > MAX_OBJECTS {
-                            msg.status |= PoseStatus::DEGRADED;
-                        }
-                    }
-                    Err(EngineFailure::Refused(e)) => {
-                        let reason = InvalidReason::EstimatorRefused;
-                        self.reject(&mut msg, reason, &format_args!("{} ({})", e, e.reason()));
-                    }
-                    Err(e @ (EngineFailure::Estimate(_) | EngineFailure::Panicked)) => {
-                        valid = true;
-                        self.counters.estimator_failures += 1;
-                        msg.status = PoseStatus::ESTIMATOR_FAILED;
-                        if let Some(suppressed) = self.estimator_log.allow(monotonic_ns()) {
-                            tracing::warn!(camera = %self.name, sequence = header.sequence, error = %e, suppressed, "estimator failed");
-                        }
-                    }
+                match checked {
+                    Err((reason, detail)) => self.reject(&mut msg, reason, &detail),
+                    Ok(()) => valid = self.estimate(&view, &header, &mut msg, &mut times),
                 }
             }
         }
         drop(sample); // give the frame back before publishing
         self.publish(ports, msg, times, valid);
         true
+    }
+
+    /// Sequence and capture-time checks of a decoded frame.
+    fn check_stream(&self, sequence: SequenceEvent, header: &FrameHeader, received_ns: u64) -> Result<(), (InvalidReason, String)> {
+        if let SequenceEvent::Regression { last } = sequence {
+            let detail = format!("sequence {} after {last} from the same publisher (repeated or backwards)", header.sequence);
+            return Err((InvalidReason::SequenceRegression, detail));
+        }
+        check_capture_time(header.capture_time_ns, received_ns)
+    }
+
+    /// Runs the engine on a checked frame and fills `msg`; returns whether
+    /// the frame counts as processed (OK or estimator failure, not refused).
+    fn estimate(&mut self, view: &fusepose_estimator::FrameView<'_>, header: &FrameHeader, msg: &mut PoseMessage, times: &mut StageTimes) -> bool {
+        // The estimator fits its work into what is left of the deadline (minus the publish step).
+        const PUBLISH_MARGIN_NS: u64 = 300_000;
+        let left_ns = header.capture_time_ns.saturating_add(self.deadline_ns).saturating_sub(monotonic_ns() + PUBLISH_MARGIN_NS);
+        self.engine.set_deadline(Some(std::time::Instant::now() + std::time::Duration::from_nanos(left_ns)));
+        // A panic inside the estimator on odd input must not take the daemon down.
+        let engine = &mut self.engine;
+        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| engine.run(view, header.sequence, times)))
+            .unwrap_or(Err(EngineFailure::Panicked));
+        match outcome {
+            Ok(()) => {
+                let poses = self.engine.poses();
+                // Non-finite poses (e.g. a network fed extreme input) are never published.
+                let mut finite = 0;
+                for pose in poses.iter().filter(|p| pose_is_finite(p)).take(MAX_OBJECTS) {
+                    msg.objects[finite] = wire_pose(pose);
+                    finite += 1;
+                }
+                let non_finite = poses.iter().filter(|p| !pose_is_finite(p)).count();
+                msg.object_count = finite as u16;
+                msg.status = PoseStatus::OK;
+                if self.engine.degraded() {
+                    msg.status |= PoseStatus::DEGRADED;
+                }
+                if poses.len() - non_finite > MAX_OBJECTS {
+                    msg.status |= PoseStatus::DEGRADED;
+                }
+                if non_finite > 0 {
+                    self.counters.poses_non_finite += non_finite as u64;
+                    msg.status = if finite > 0 { msg.status | PoseStatus::DEGRADED } else { PoseStatus::ESTIMATOR_FAILED };
+                    if finite == 0 {
+                        self.counters.estimator_failures += 1;
+                    }
+                    if let Some(suppressed) = self.estimator_log.allow(monotonic_ns()) {
+                        tracing::warn!(camera = %self.name, sequence = header.sequence, non_finite, suppressed, "estimator returned non-finite poses; dropped");
+                    }
+                }
+                true
+            }
+            Err(EngineFailure::Refused(e)) => {
+                let reason = content_reason(&e);
+                self.reject(msg, reason, &format_args!("{} ({})", e, e.reason()));
+                false
+            }
+            // Estimate, segmentation or a panic: the frame was fine, the engine failed.
+            Err(e) => {
+                self.counters.estimator_failures += 1;
+                msg.status = PoseStatus::ESTIMATOR_FAILED;
+                if let Some(suppressed) = self.estimator_log.allow(monotonic_ns()) {
+                    tracing::warn!(camera = %self.name, sequence = header.sequence, error = %e, suppressed, "estimator failed");
+                }
+                true
+            }
+        }
     }
 
     fn reject(&mut self, msg: &mut PoseMessage, reason: InvalidReason, detail: &dyn std::fmt::Display) {
@@ -272,6 +360,8 @@ impl CameraState {
             invalid_by_reason: c.invalid_by_reason,
             deadline_misses: c.deadline_misses,
             estimator_failures: c.estimator_failures,
+            poses_non_finite: c.poses_non_finite,
+            producer_restarts: c.producer_restarts,
             since_start: self.latency.since_start.summaries(),
             last_window: self.latency.last_window.summaries(),
             ..StatsSnapshot::default()

@@ -18,6 +18,21 @@ pub enum EstimatorKind {
     None,
 }
 
+/// Where a frame's instance labels come from (`estimator.masks`).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum MaskSource {
+    /// The frame's label plane when it has one, else the built-in segmenter when the
+    /// weight file has one (else the frame is refused for missing labels).
+    #[default]
+    Auto,
+    /// Only the frame's label plane; the segmenter is never loaded.
+    Labels,
+    /// Always the built-in segmenter (label planes are ignored); a weight file
+    /// without one is a startup error.
+    Net,
+}
+
 /// The whole configuration file.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
@@ -59,6 +74,35 @@ pub struct EstimatorConfig {
     /// thread plus one persistent worker); ICP runs inline (1). Larger values
     /// are accepted with a warning.
     pub worker_threads: usize,
+    /// Instance labels: `auto`, `labels` or `net` (see [`MaskSource`]).
+    pub masks: MaskSource,
+    /// Network: fit each frame into its deadline (fewer refiner iterations,
+    /// then fewer points; the message then carries DEGRADED).
+    pub deadline_aware: bool,
+    /// CPUs to pin the loop thread and the network's worker thread to, in that
+    /// order (empty = no pinning).
+    pub pin_cpus: Vec<usize>,
+    pub tracking: TrackingSettings,
+}
+
+/// `[estimator.tracking]`: start the refiner from the previous frame's pose (network only).
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct TrackingSettings {
+    pub enabled: bool,
+    /// A pose is kept and tracked when the median distance of the observed
+    /// points to the posed model is at most this, millimetres.
+    pub max_fit_mm: f64,
+    /// A full estimate at least every this many frames per object.
+    pub full_estimate_every: u32,
+    /// Refiner iterations when tracking.
+    pub refine_iterations: usize,
+}
+
+impl Default for TrackingSettings {
+    fn default() -> Self {
+        Self { enabled: false, max_fit_mm: 8.0, full_estimate_every: 10, refine_iterations: 2 }
+    }
 }
 
 /// `[stats]`
@@ -85,6 +129,9 @@ pub struct IpcConfig {
     pub cleanup_interval_s: f64,
     /// Period of the loop's housekeeping tick (stats requests, windows, cleanup), milliseconds.
     pub tick_ms: u64,
+    /// Poll for the next frame from this long before it is due (the camera
+    /// period is learned) instead of waiting for the event wake-up, µs (0 = never).
+    pub receive_spin_us: u64,
 }
 
 impl Default for DaemonConfig {
@@ -103,7 +150,7 @@ impl Default for DaemonConfig {
 impl Default for EstimatorConfig {
     fn default() -> Self {
         Self {
-            kind: EstimatorKind::Icp,
+            kind: EstimatorKind::Net,
             weights: PathBuf::from("models/builtin.safetensors"),
             objects: "builtin".to_owned(),
             objects_scale: 1.0,
@@ -113,6 +160,10 @@ impl Default for EstimatorConfig {
             min_pixels: 50,
             refine_iterations: 2,
             worker_threads: 1,
+            masks: MaskSource::Auto,
+            deadline_aware: true,
+            pin_cpus: Vec::new(),
+            tracking: TrackingSettings::default(),
         }
     }
 }
@@ -125,7 +176,7 @@ impl Default for StatsConfig {
 
 impl Default for IpcConfig {
     fn default() -> Self {
-        Self { root_path: PathBuf::new(), prefix: String::new(), cleanup_interval_s: 5.0, tick_ms: 20 }
+        Self { root_path: PathBuf::new(), prefix: String::new(), cleanup_interval_s: 5.0, tick_ms: 20, receive_spin_us: 200 }
     }
 }
 
@@ -197,6 +248,19 @@ impl DaemonConfig {
         if e.worker_threads == 0 || e.worker_threads > 64 {
             return Err(invalid("estimator.worker_threads", e.worker_threads, "must be in 1..=64"));
         }
+        let t = &e.tracking;
+        if !(t.max_fit_mm.is_finite() && t.max_fit_mm > 0.0) {
+            return Err(invalid("estimator.tracking.max_fit_mm", t.max_fit_mm, "must be a positive number of millimetres"));
+        }
+        if t.full_estimate_every == 0 {
+            return Err(invalid("estimator.tracking.full_estimate_every", t.full_estimate_every, "must be at least 1"));
+        }
+        if t.refine_iterations == 0 || t.refine_iterations > 100 {
+            return Err(invalid("estimator.tracking.refine_iterations", t.refine_iterations, "must be in 1..=100"));
+        }
+        if e.pin_cpus.len() > 2 {
+            return Err(invalid("estimator.pin_cpus", &e.pin_cpus, "at most 2 CPUs (loop thread, network worker)"));
+        }
         let s = &self.stats;
         if !(s.window_s.is_finite() && s.window_s >= 0.1) {
             return Err(invalid("stats.window_s", s.window_s, "must be at least 0.1 seconds"));
@@ -207,6 +271,9 @@ impl DaemonConfig {
         let i = &self.ipc;
         if !(i.cleanup_interval_s.is_finite() && i.cleanup_interval_s > 0.0) {
             return Err(invalid("ipc.cleanup_interval_s", i.cleanup_interval_s, "must be positive"));
+        }
+        if i.receive_spin_us > 100_000 {
+            return Err(invalid("ipc.receive_spin_us", i.receive_spin_us, "must be at most 100000 (0 = never poll)"));
         }
         if i.tick_ms == 0 || i.tick_ms > 10_000 {
             return Err(invalid("ipc.tick_ms", i.tick_ms, "must be in 1..=10000"));
@@ -241,7 +308,7 @@ mod tests {
         let c = DaemonConfig::parse("").unwrap();
         assert_eq!(c, DaemonConfig::default());
         assert_eq!(c.deadline_ns(), 41_666_667);
-        assert_eq!(c.estimator.kind, EstimatorKind::Icp);
+        assert_eq!(c.estimator.kind, EstimatorKind::Net);
     }
 
     #[test]
@@ -249,6 +316,30 @@ mod tests {
         let text = include_str!("../../config/fuseposed.toml");
         let c = DaemonConfig::parse(text).unwrap();
         assert_eq!(c.cameras, ["cam0"]);
+        assert_eq!(c.estimator.kind, EstimatorKind::Net, "the shipped config runs the shipped network");
+    }
+
+    #[test]
+    fn mask_sources_parse_and_default_to_auto() {
+        assert_eq!(DaemonConfig::parse("").unwrap().estimator.masks, MaskSource::Auto);
+        let c = DaemonConfig::parse("[estimator]\nmasks = \"net\"\n").unwrap();
+        assert_eq!(c.estimator.masks, MaskSource::Net);
+        let err = DaemonConfig::parse("[estimator]\nmasks = \"gt\"\n").unwrap_err().to_string();
+        assert!(err.contains("masks") || err.contains("gt"), "{err}");
+    }
+
+    #[test]
+    fn tracking_deadline_and_spin_keys_parse_and_are_checked() {
+        let c = DaemonConfig::parse(
+            "[estimator]\ndeadline_aware = false\npin_cpus = [0, 1]\n[estimator.tracking]\nenabled = true\nmax_fit_mm = 5.0\n[ipc]\nreceive_spin_us = 0\n",
+        )
+        .unwrap();
+        assert!(!c.estimator.deadline_aware && c.estimator.tracking.enabled && c.ipc.receive_spin_us == 0);
+        assert_eq!((c.estimator.tracking.max_fit_mm, c.estimator.tracking.full_estimate_every), (5.0, 10));
+        let err = DaemonConfig::parse("[estimator.tracking]\nfull_estimate_every = 0\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.tracking.full_estimate_every"), "{err}");
+        let err = DaemonConfig::parse("[estimator]\npin_cpus = [0, 1, 2]\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.pin_cpus"), "{err}");
     }
 
     #[test]

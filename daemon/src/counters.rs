@@ -13,8 +13,10 @@ pub struct FrameCounters {
     pub invalid_by_reason: [u64; InvalidReason::COUNT],
     pub deadline_misses: u64,
     pub estimator_failures: u64,
-    /// Times the producer's sequence went backwards (a restarted producer).
+    /// Times frames started coming from a new publisher (a restarted producer).
     pub producer_restarts: u64,
+    /// Object poses with a NaN/infinite value, dropped instead of published.
+    pub poses_non_finite: u64,
 }
 
 impl FrameCounters {
@@ -24,10 +26,12 @@ impl FrameCounters {
     }
 }
 
-/// Follows the producer's sequence numbers to count frames never received.
+/// Follows each publisher's sequence numbers: counts frames never received
+/// and spots numbers that go backwards or repeat.
 #[derive(Clone, Debug, Default)]
 pub struct SequenceTracker {
-    last: Option<u64>,
+    /// (iceoryx2 publisher id, last accepted sequence).
+    last: Option<(u128, u64)>,
 }
 
 /// What one received sequence number means.
@@ -37,19 +41,23 @@ pub enum SequenceEvent {
     InOrder,
     /// `missed` sequence numbers were skipped.
     Gap { missed: u64 },
-    /// Not larger than the last one: the producer restarted (counting begins anew).
+    /// The first frame of a new publisher (a restarted producer): counting begins anew.
     Restart,
+    /// Not larger than the last one from the same publisher: a repeated or
+    /// reordered frame. The tracker keeps the larger number.
+    Regression { last: u64 },
 }
 
 impl SequenceTracker {
-    pub fn observe(&mut self, sequence: u64) -> SequenceEvent {
+    pub fn observe(&mut self, publisher: u128, sequence: u64) -> SequenceEvent {
         let event = match self.last {
             None => SequenceEvent::InOrder,
-            Some(last) if sequence == last.wrapping_add(1) => SequenceEvent::InOrder,
-            Some(last) if sequence > last => SequenceEvent::Gap { missed: sequence - last - 1 },
-            Some(_) => SequenceEvent::Restart,
+            Some((p, _)) if p != publisher => SequenceEvent::Restart,
+            Some((_, last)) if sequence == last.wrapping_add(1) => SequenceEvent::InOrder,
+            Some((_, last)) if sequence > last => SequenceEvent::Gap { missed: sequence - last - 1 },
+            Some((_, last)) => return SequenceEvent::Regression { last },
         };
-        self.last = Some(sequence);
+        self.last = Some((publisher, sequence));
         event
     }
 }
@@ -59,12 +67,17 @@ mod tests {
     use super::*;
 
     #[test]
-    fn gaps_and_restarts_are_told_apart() {
+    fn gaps_restarts_and_regressions_are_told_apart() {
         let mut t = SequenceTracker::default();
-        assert_eq!(t.observe(5), SequenceEvent::InOrder);
-        assert_eq!(t.observe(6), SequenceEvent::InOrder);
-        assert_eq!(t.observe(9), SequenceEvent::Gap { missed: 2 });
-        assert_eq!(t.observe(0), SequenceEvent::Restart);
-        assert_eq!(t.observe(1), SequenceEvent::InOrder);
+        assert_eq!(t.observe(1, 5), SequenceEvent::InOrder);
+        assert_eq!(t.observe(1, 6), SequenceEvent::InOrder);
+        assert_eq!(t.observe(1, 9), SequenceEvent::Gap { missed: 2 });
+        // Same publisher going back or repeating: refused, the tracker keeps 9.
+        assert_eq!(t.observe(1, 9), SequenceEvent::Regression { last: 9 });
+        assert_eq!(t.observe(1, 3), SequenceEvent::Regression { last: 9 });
+        assert_eq!(t.observe(1, 10), SequenceEvent::InOrder);
+        // A new publisher may start anywhere.
+        assert_eq!(t.observe(2, 0), SequenceEvent::Restart);
+        assert_eq!(t.observe(2, 1), SequenceEvent::InOrder);
     }
 }

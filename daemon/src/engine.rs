@@ -1,16 +1,20 @@
 //! The estimator side of the daemon: object set, workspace and estimator per
-//! camera, chosen from the configuration, timed per stage.
+//! camera, chosen from the configuration, timed per stage. Frames without a
+//! label plane are segmented by the built-in segmenter when the weight file
+//! has one (`estimator.masks`).
 
 use std::sync::Arc;
 
 use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions};
+use fusepose_estimator::seg::{SegEngine, SegError, SegFile};
 use fusepose_estimator::{
-    EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, ObjectPose, PoseSet, Workspace, WorkspaceConfig,
+    EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
+    WorkspaceConfig,
 };
 use fusepose_scene::ObjectSet;
 
-use crate::config::{EstimatorConfig, EstimatorKind};
+use crate::config::{EstimatorConfig, EstimatorKind, MaskSource};
 
 /// Builds one estimator per camera (estimators keep per-camera state).
 pub type EstimatorFactory = Box<dyn Fn() -> anyhow::Result<Box<dyn Estimator>>>;
@@ -24,6 +28,9 @@ pub struct EngineSpec {
     /// Stage the estimator's time is recorded under.
     pub estimate_stage: Stage,
     pub workspace: WorkspaceConfig,
+    /// The built-in segmenter (checked against the object set), when masks may come from it.
+    pub segmenter: Option<Arc<SegFile>>,
+    pub masks: MaskSource,
 }
 
 /// The object set named by `estimator.objects`.
@@ -55,8 +62,44 @@ fn icp_factory(objects: Arc<ObjectSet>) -> EstimatorFactory {
     })
 }
 
-/// Resolves `[estimator]`: loads objects, applies the net → ICP fallback.
+/// The segmenter embedded in `estimator.weights`, per `estimator.masks`: `labels` never
+/// loads one; `auto` uses one when the file has it (a file for other objects is an
+/// error, a file without one is not); `net` requires one.
+fn segmenter(config: &EstimatorConfig, objects: &ObjectSet) -> anyhow::Result<Option<Arc<SegFile>>> {
+    let weights = config.weights.display().to_string();
+    let error = |e: NetLoadError| anyhow::anyhow!("estimator.masks = {:?}, estimator.weights = {weights:?}: {e}", config.masks);
+    match config.masks {
+        MaskSource::Labels => Ok(None),
+        MaskSource::Auto if !config.weights.exists() => Ok(None),
+        MaskSource::Auto | MaskSource::Net => match SegFile::read(&config.weights) {
+            Ok(file) => {
+                file.check_objects(objects).map_err(error)?;
+                Ok(Some(Arc::new(file)))
+            }
+            Err(NetLoadError::NoSegmenter) if config.masks == MaskSource::Auto => Ok(None),
+            Err(e) => Err(error(e)),
+        },
+    }
+}
+
+/// Resolves `[estimator]`: loads objects, applies the net → ICP fallback, loads the segmenter.
 pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
+    let mut spec = resolve_estimator(config)?;
+    if spec.factory.is_some() {
+        let objects = load_objects(config)?;
+        spec.segmenter = segmenter(config, &objects)?;
+        spec.masks = config.masks;
+        if let Some(seg) = &spec.segmenter {
+            spec.description += &format!(
+                "; masks {:?}: segmenter {}x{} when frames carry no labels",
+                config.masks, seg.config.input_width, seg.config.input_height
+            );
+        }
+    }
+    Ok(spec)
+}
+
+fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     let objects = Arc::new(load_objects(config)?);
     let workspace = workspace_config(config, &objects);
     let icp = || -> anyhow::Result<EngineSpec> {
@@ -65,6 +108,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             factory: Some(icp_factory(objects.clone())),
             estimate_stage: Stage::Refine,
             workspace,
+            segmenter: None,
+            masks: MaskSource::Labels,
         })
     };
     match config.kind {
@@ -73,6 +118,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             factory: None,
             estimate_stage: Stage::Network,
             workspace,
+            segmenter: None,
+            masks: MaskSource::Labels,
         }),
         EstimatorKind::Icp => icp(),
         EstimatorKind::Net => {
@@ -88,12 +135,24 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     }
 }
 
-/// The fusion network from `estimator.weights`, checked against the object set now.
-fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<EngineSpec> {
-    let options = || NetOptions {
+/// Load options of the network from `[estimator]` (threads, refiner, tracking).
+fn net_options(config: &EstimatorConfig) -> NetOptions {
+    let t = &config.tracking;
+    NetOptions {
         refine_iterations: Some(config.refine_iterations),
         threads: config.worker_threads.clamp(1, 2),
-    };
+        tracking: t.enabled.then(|| fusepose_estimator::tracking::TrackingConfig {
+            max_fit_m: t.max_fit_mm / 1000.0,
+            full_estimate_every: t.full_estimate_every,
+            refine_iterations: t.refine_iterations,
+        }),
+        pin_worker_cpu: config.pin_cpus.get(1).copied(),
+    }
+}
+
+/// The fusion network from `estimator.weights`, checked against the object set now.
+fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<EngineSpec> {
+    let options = || net_options(config);
     let weights_error = |e: NetLoadError| anyhow::anyhow!("estimator.weights = {:?}: {e}", config.weights.display().to_string());
     let probe = NetEstimator::load(&config.weights, &objects, options()).map_err(weights_error)?;
     let workspace = WorkspaceConfig { min_pixels: config.min_pixels, ..probe.workspace_config(config.max_instances) };
@@ -107,16 +166,22 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
     let description = format!("net ({}, {} objects, {} refine iterations)", config.weights.display(), objects.len(), config.refine_iterations);
     // The probe serves the first camera; further cameras load their own copy.
     let first = std::sync::Mutex::new(Some(probe));
-    let (path, threads, refine_iterations) = (config.weights.clone(), config.worker_threads.clamp(1, 2), config.refine_iterations);
+    let (path, later_options) = (config.weights.clone(), net_options(config));
     let factory: EstimatorFactory = Box::new(move || {
         if let Some(net) = first.lock().ok().and_then(|mut f| f.take()) {
             return Ok(Box::new(net) as Box<dyn Estimator>);
         }
-        let options = NetOptions { refine_iterations: Some(refine_iterations), threads };
-        let net = NetEstimator::load(&path, &objects, options).map_err(|e| anyhow::anyhow!("estimator.weights: {e}"))?;
+        let net = NetEstimator::load(&path, &objects, later_options).map_err(|e| anyhow::anyhow!("estimator.weights: {e}"))?;
         Ok(Box::new(net) as Box<dyn Estimator>)
     });
-    Ok(EngineSpec { description, factory: Some(factory), estimate_stage: Stage::Network, workspace })
+    Ok(EngineSpec {
+        description,
+        factory: Some(factory),
+        estimate_stage: Stage::Network,
+        workspace,
+        segmenter: None,
+        masks: MaskSource::Labels,
+    })
 }
 
 /// Why the engine produced no poses for a frame.
@@ -127,17 +192,26 @@ pub enum EngineFailure {
     Refused(#[from] FrameError),
     #[error("estimator failed: {0}")]
     Estimate(EstimateError),
+    #[error("segmenter failed: {0}")]
+    Segment(SegError),
     /// The estimator panicked (a bug in it); the frame gets an ESTIMATOR_FAILED message.
     #[error("estimator panicked")]
     Panicked,
 }
 
-/// One camera's estimator, workspace and pose buffer (allocated once).
+/// One camera's estimator, workspace, segmenter and buffers (allocated once;
+/// the label buffer again only when the frame size changes).
 pub struct PoseEngine {
     estimator: Option<Box<dyn Estimator>>,
     workspace: Option<Workspace>,
     poses: PoseSet,
     estimate_stage: Stage,
+    segmenter: Option<SegEngine>,
+    masks: MaskSource,
+    /// The segmenter's label plane for the current frame.
+    labels: Vec<u16>,
+    /// `estimator.deadline_aware = false`: deadlines are not passed on.
+    ignore_deadlines: bool,
 }
 
 /// Stage durations of one frame, ns (0 = stage not run).
@@ -150,11 +224,19 @@ impl PoseEngine {
             Some(_) => Some(Workspace::new(spec.workspace).map_err(|e| anyhow::anyhow!("estimator: {e}"))?),
             None => None,
         };
+        let segmenter = match (&estimator, &spec.segmenter) {
+            (Some(_), Some(file)) => Some(SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?),
+            _ => None,
+        };
         Ok(Self {
             estimator,
             workspace,
             poses: PoseSet::with_capacity(spec.workspace.max_instances),
             estimate_stage: spec.estimate_stage,
+            segmenter,
+            masks: spec.masks,
+            labels: Vec::new(),
+            ignore_deadlines: false,
         })
     }
 
@@ -165,6 +247,10 @@ impl PoseEngine {
             workspace: Some(Workspace::new(workspace).map_err(|e| anyhow::anyhow!("estimator: {e}"))?),
             poses: PoseSet::with_capacity(workspace.max_instances),
             estimate_stage,
+            segmenter: None,
+            masks: MaskSource::Labels,
+            labels: Vec::new(),
+            ignore_deadlines: false,
         })
     }
 
@@ -173,6 +259,26 @@ impl PoseEngine {
         self.poses.clear();
         let (Some(estimator), Some(workspace)) = (self.estimator.as_mut(), self.workspace.as_mut()) else {
             return frame.validate().map_err(EngineFailure::Refused);
+        };
+        // Segment when the frame brings no labels (`auto`) or always (`net`).
+        let segmented;
+        let frame = match self.segmenter.as_mut() {
+            Some(seg) if self.masks == MaskSource::Net || frame.labels.is_none() => {
+                let ts = fusepose_client::monotonic_ns();
+                frame.validate()?;
+                let pixels = frame.width() * frame.height();
+                if self.labels.len() != pixels {
+                    self.labels.resize(pixels, 0);
+                }
+                seg.segment(frame, &mut self.labels).map_err(|e| match e {
+                    SegError::Frame(f) => EngineFailure::Refused(f),
+                    other => EngineFailure::Segment(other),
+                })?;
+                times[Stage::Segmentation as usize] = fusepose_client::monotonic_ns() - ts;
+                segmented = FrameView { labels: Some(LabelPlane::U16(&self.labels)), ..*frame };
+                &segmented
+            }
+            _ => frame,
         };
         let t0 = fusepose_client::monotonic_ns();
         workspace.prepare(frame, seed)?;
@@ -188,6 +294,25 @@ impl PoseEngine {
         }
     }
 
+    /// The next [`PoseEngine::run`] should end by `deadline` (the estimator
+    /// degrades to fit), unless deadline-aware estimation is off.
+    pub fn set_deadline(&mut self, deadline: Option<std::time::Instant>) {
+        let deadline = deadline.filter(|_| !self.ignore_deadlines);
+        if let Some(e) = self.estimator.as_mut() {
+            e.set_deadline(deadline);
+        }
+    }
+
+    /// `estimator.deadline_aware`: false runs every frame in full whatever its deadline.
+    pub fn set_deadline_aware(&mut self, on: bool) {
+        self.ignore_deadlines = !on;
+    }
+
+    /// Whether the last run gave up accuracy to meet its deadline.
+    pub fn degraded(&self) -> bool {
+        self.estimator.as_ref().is_some_and(|e| e.degraded())
+    }
+
     pub fn poses(&self) -> &[ObjectPose] {
         self.poses.as_slice()
     }
@@ -195,5 +320,10 @@ impl PoseEngine {
     /// Instances found in the last frame but not estimated (beyond capacity).
     pub fn instances_found(&self) -> usize {
         self.workspace.as_ref().map_or(0, |w| w.instances.len())
+    }
+
+    /// Largest label id a producer may send: the object set's classes (0 = any, transport only).
+    pub fn label_classes(&self) -> u16 {
+        self.workspace.as_ref().map_or(0, |w| w.config.num_classes)
     }
 }

@@ -5,9 +5,9 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use fusepose_client::{Ipc, Stage, monotonic_ns};
+use fusepose_client::{ArrivalPredictor, Ipc, Stage, WaitPlan, WaitStrategy, monotonic_ns};
 use iceoryx2::prelude::*;
-use iceoryx2::waitset::WaitSetRunResult;
+use iceoryx2::waitset::{WaitSetAttachmentId, WaitSetRunResult};
 
 use crate::camera::{CameraPorts, CameraState};
 use crate::config::DaemonConfig;
@@ -39,6 +39,19 @@ fn write_windows(log: &mut Option<IntervalLog>, states: &[CameraState], end_ns: 
     }
 }
 
+/// Polls every camera's frame queue until one has a frame (its index) or `until_ns` passes.
+fn poll_frames(ports: &[CameraPorts], until_ns: u64) -> Option<usize> {
+    loop {
+        if let Some(i) = ports.iter().position(|p| p.frames.has_samples().unwrap_or(false)) {
+            return Some(i);
+        }
+        if monotonic_ns() >= until_ns {
+            return None;
+        }
+        std::hint::spin_loop();
+    }
+}
+
 /// Runs the daemon until SIGINT/SIGTERM (or `stop` becomes true).
 pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool>>) -> anyhow::Result<RunReport> {
     let threads_used = if spec.estimate_stage == Stage::Network && spec.factory.is_some() { 2 } else { 1 };
@@ -49,6 +62,8 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
             "estimator.worker_threads: only {threads_used} used (the network uses at most 2, ICP 1)"
         );
     }
+    // Refuse a root directory other users could tamper with, before iceoryx2 touches it.
+    crate::ipc_root::check_root_path(&crate::ipc_root::effective_root(&config.ipc_options())?)?;
     let ipc = Ipc::new(&config.ipc_options())?;
     let (removed, failed) = ipc.cleanup_dead_nodes();
     if removed + failed > 0 {
@@ -59,7 +74,14 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
     let mut states = Vec::with_capacity(config.cameras.len());
     for name in &config.cameras {
         ports.push(CameraPorts::open(&ipc, name)?);
-        states.push(CameraState::new(name, PoseEngine::new(spec)?, config.deadline_ns(), start_ns));
+        let mut engine = PoseEngine::new(spec)?;
+        engine.set_deadline_aware(config.estimator.deadline_aware);
+        states.push(CameraState::new(name, engine, config.deadline_ns(), start_ns));
+    }
+    // After the engines: their worker threads were started unpinned (they pin themselves).
+    if let Some(&cpu) = config.estimator.pin_cpus.first() {
+        fusepose_estimator::cpu_pin::pin_current_thread(cpu)
+            .map_err(|e| anyhow::anyhow!("estimator.pin_cpus = {:?}: cannot pin the loop thread to CPU {cpu}: {e}", config.estimator.pin_cpus))?;
     }
     let mut hlog = if config.stats.hlog_path.as_os_str().is_empty() {
         None
@@ -95,10 +117,32 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
     let cleanup_ns = seconds_to_ns(config.ipc.cleanup_interval_s);
     let (mut last_summary, mut last_cleanup) = (start_ns, start_ns);
     let mut fired = vec![false; ports.len()];
+    // Spin-then-wait (client library): poll the frame queues from shortly
+    // before a frame is due, saving the 15-30 µs event wake-up.
+    let spin = Duration::from_micros(config.ipc.receive_spin_us);
+    let strategy = if spin.is_zero() { WaitStrategy::Block } else { WaitStrategy::SpinNearArrival { margin: spin } };
+    let mut arrivals = vec![ArrivalPredictor::default(); ports.len()];
     loop {
         let mut ticked = false;
         fired.iter_mut().for_each(|f| *f = false);
-        let result = waitset.wait_and_process_once(|id| {
+        let now = monotonic_ns();
+        let (mut spin_until, mut block_until) = (0u64, u64::MAX);
+        for a in &arrivals {
+            match a.plan(strategy, now) {
+                WaitPlan::SpinUntil(t) => spin_until = spin_until.max(t),
+                WaitPlan::BlockUntil(t) => block_until = block_until.min(t),
+                WaitPlan::Block => {}
+            }
+        }
+        if spin_until > now
+            && let Some(i) = poll_frames(&ports, spin_until)
+        {
+            arrivals[i].observe(monotonic_ns());
+            let _ = ports[i].frame_listener.try_wait(|_| {});
+            states[i].process_newest(&ports[i]);
+            continue;
+        }
+        let on_event = |id: WaitSetAttachmentId<ipc::Service>| {
             if id.has_event_from(&tick) {
                 ticked = true;
             }
@@ -108,7 +152,13 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
                 }
             }
             CallbackProgression::Continue
-        });
+        };
+        let now = monotonic_ns();
+        let result = if block_until == u64::MAX {
+            waitset.wait_and_process_once(on_event)
+        } else {
+            waitset.wait_and_process_once_with_timeout(on_event, Duration::from_nanos(block_until.saturating_sub(now)))
+        };
         match result {
             Ok(WaitSetRunResult::TerminationRequest) => {
                 tracing::info!("termination requested (SIGINT/SIGTERM)");
@@ -119,7 +169,11 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
             Ok(_) => {}
             Err(e) => anyhow::bail!("WaitSet failed: {e:?}"),
         }
+        let woke_ns = monotonic_ns();
         for (i, p) in ports.iter().enumerate() {
+            if fired[i] {
+                arrivals[i].observe(woke_ns);
+            }
             if fired[i] || ticked {
                 // Consume the wake-ups; the subscriber is drained below either way.
                 let _ = p.frame_listener.try_wait(|_| {});

@@ -14,6 +14,7 @@ pub mod engine;
 pub mod event_loop;
 pub mod frame_view;
 pub mod interval_log;
+pub mod ipc_root;
 pub mod latency;
 pub mod rate_limited_log;
 

@@ -10,7 +10,8 @@ use fusepose_daemon::{DaemonConfig, engine};
 #[derive(Parser)]
 #[command(name = "fuseposed", version, about)]
 struct Args {
-    /// Configuration file (TOML). Without it every key takes its default.
+    /// Configuration file (TOML), e.g. config/fuseposed.toml, which documents
+    /// every key. Without it every key takes its default.
     #[arg(long)]
     config: Option<PathBuf>,
     /// Check the configuration and exit.

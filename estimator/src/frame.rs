@@ -11,6 +11,20 @@ use fusepose_scene::Intrinsics;
 /// Largest accepted image side, pixels.
 pub const MAX_IMAGE_SIDE: u32 = 4096;
 
+/// Accepted focal lengths fx, fy, pixels (the same range as the wire decoder's
+/// `fusepose_client::FOCAL_RANGE_PX`). Outside it, e.g. fx = 1e-300,
+/// back-projected points land at infinity and every pose is non-finite.
+pub const FOCAL_RANGE_PX: core::ops::RangeInclusive<f64> = 1.0..=1.0e6;
+
+/// What a depth plane holds, counted in one pass (see [`DepthPlane::census`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct DepthCensus {
+    /// Finite, positive readings.
+    pub valid: usize,
+    /// NaN or infinite values (f32 depth only).
+    pub non_finite: usize,
+}
+
 /// Byte order of the colour plane (3 bytes per pixel, row-major).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum ColorFormat {
@@ -49,6 +63,20 @@ impl DepthPlane<'_> {
         };
         (z.is_finite() && z > 0.0).then_some(z)
     }
+
+    /// Counts valid readings and NaN/infinite values.
+    pub fn census(&self) -> DepthCensus {
+        match self {
+            DepthPlane::U16 { data, .. } => {
+                DepthCensus { valid: data.iter().filter(|&&d| d != 0).count(), non_finite: 0 }
+            }
+            DepthPlane::F32(data) => data.iter().fold(DepthCensus::default(), |mut c, &z| {
+                c.valid += (z.is_finite() && z > 0.0) as usize;
+                c.non_finite += (!z.is_finite()) as usize;
+                c
+            }),
+        }
+    }
 }
 
 /// Per-pixel class ids (0 = background).
@@ -69,6 +97,14 @@ impl LabelPlane<'_> {
 
     pub fn is_empty(&self) -> bool {
         self.len() == 0
+    }
+
+    /// Largest class id in the plane (0 for an empty or all-background plane).
+    pub fn max_class(&self) -> u16 {
+        match self {
+            LabelPlane::U8(data) => data.iter().copied().max().unwrap_or(0) as u16,
+            LabelPlane::U16(data) => data.iter().copied().max().unwrap_or(0),
+        }
     }
 
     /// Class id of value `index` (0 = background, also for an out-of-range index).
@@ -110,8 +146,8 @@ impl FrameView<'_> {
 
     /// Checks everything later stages rely on; never panics.
     ///
-    /// Accepted: width and height in 1..=[`MAX_IMAGE_SIDE`]; fx, fy finite
-    /// and positive; cx in [-0.5 w, 1.5 w] and cy in [-0.5 h, 1.5 h] (and
+    /// Accepted: width and height in 1..=[`MAX_IMAGE_SIDE`]; fx, fy in
+    /// [`FOCAL_RANGE_PX`]; cx in [-0.5 w, 1.5 w] and cy in [-0.5 h, 1.5 h] (and
     /// finite); colour plane w*h*3 bytes; depth and (when present) label
     /// planes w*h values; a u16 depth scale finite and positive (metres per unit).
     pub fn validate(&self) -> Result<(), FrameError> {
@@ -119,7 +155,8 @@ impl FrameView<'_> {
         if k.width == 0 || k.height == 0 || k.width > MAX_IMAGE_SIDE || k.height > MAX_IMAGE_SIDE {
             return Err(FrameError::BadSize { width: k.width, height: k.height });
         }
-        if !(k.fx.is_finite() && k.fx > 0.0 && k.fy.is_finite() && k.fy > 0.0) {
+        // RangeInclusive::contains is false for NaN.
+        if !(FOCAL_RANGE_PX.contains(&k.fx) && FOCAL_RANGE_PX.contains(&k.fy)) {
             return Err(FrameError::BadFocalLength { fx: k.fx, fy: k.fy });
         }
         let (w, h) = (k.width as f64, k.height as f64);
@@ -147,6 +184,31 @@ impl FrameView<'_> {
         }
         Ok(())
     }
+
+    /// Checks the plane contents (one pass over depth and labels; call after
+    /// [`FrameView::validate`]): at least one depth reading, and no label id
+    /// above `num_classes` (0 = any id). Frames failing these are not
+    /// malformed but carry nothing a pose could come from, or a label map that
+    /// does not match the object set.
+    pub fn check_content(&self, num_classes: u16) -> Result<DepthCensus, FrameError> {
+        let census = self.depth.census();
+        if census.valid == 0 {
+            return Err(if census.non_finite > 0 {
+                FrameError::DepthNonFinite { values: census.non_finite }
+            } else {
+                FrameError::DepthEmpty
+            });
+        }
+        if let Some(labels) = &self.labels
+            && num_classes != 0
+        {
+            let max = labels.max_class();
+            if max > num_classes {
+                return Err(FrameError::LabelOutOfRange { max, num_classes });
+            }
+        }
+        Ok(census)
+    }
 }
 
 /// Why a frame was refused. Each variant is a distinct reason for stats; see
@@ -158,7 +220,7 @@ pub enum FrameError {
     /// Intrinsics inconsistent in a way not covered by a more specific variant.
     #[error("intrinsics invalid: {0}")]
     BadIntrinsics(&'static str),
-    #[error("focal length fx={fx}, fy={fy} is not a positive finite number of pixels")]
+    #[error("focal length fx={fx}, fy={fy} is not a finite number of pixels in {:?}", FOCAL_RANGE_PX)]
     BadFocalLength { fx: f64, fy: f64 },
     #[error("principal point ({cx}, {cy}) lies outside [-0.5, 1.5] x the image size")]
     BadPrincipalPoint { cx: f64, cy: f64 },
@@ -169,6 +231,15 @@ pub enum FrameError {
     /// The frame carries no label plane but the call needs one.
     #[error("frame has no label plane")]
     MissingLabels,
+    /// No depth reading at all (every value 0, or negative for f32 depth).
+    #[error("the depth plane holds no reading (all zero)")]
+    DepthEmpty,
+    /// No depth reading at all, and NaN/infinite values among them.
+    #[error("the depth plane holds no reading ({values} NaN/infinite values)")]
+    DepthNonFinite { values: usize },
+    /// A label id above the object set's number of classes.
+    #[error("label id {max} exceeds the {num_classes} object classes")]
+    LabelOutOfRange { max: u16, num_classes: u16 },
 }
 
 impl FrameError {
@@ -183,6 +254,9 @@ impl FrameError {
             FrameError::PlaneSize { .. } => 5,
             FrameError::BadDepthScale(_) => 6,
             FrameError::MissingLabels => 7,
+            FrameError::DepthEmpty => 8,
+            FrameError::DepthNonFinite { .. } => 9,
+            FrameError::LabelOutOfRange { .. } => 10,
         }
     }
 
@@ -196,6 +270,9 @@ impl FrameError {
             FrameError::PlaneSize { .. } => "plane_size",
             FrameError::BadDepthScale(_) => "bad_depth_scale",
             FrameError::MissingLabels => "missing_labels",
+            FrameError::DepthEmpty => "depth_empty",
+            FrameError::DepthNonFinite { .. } => "depth_non_finite",
+            FrameError::LabelOutOfRange { .. } => "label_out_of_range",
         }
     }
 }
@@ -252,7 +329,8 @@ mod tests {
     #[test]
     fn bad_focal_lengths_are_refused() {
         let p = planes();
-        for (fx, fy) in [(0.0, 500.0), (500.0, -1.0), (f64::NAN, 500.0), (500.0, f64::INFINITY)] {
+        // 1e-300 and 0.5 are positive and finite but absurd (points at infinity).
+        for (fx, fy) in [(0.0, 500.0), (500.0, -1.0), (f64::NAN, 500.0), (500.0, f64::INFINITY), (1e-300, 500.0), (500.0, 0.5), (2e6, 500.0)] {
             let mut f = frame(&p);
             f.intrinsics.fx = fx;
             f.intrinsics.fy = fy;
@@ -319,13 +397,42 @@ mod tests {
             FrameError::PlaneSize { plane: "color", got: 0, expected: 1 },
             FrameError::BadDepthScale(0.0),
             FrameError::MissingLabels,
+            FrameError::DepthEmpty,
+            FrameError::DepthNonFinite { values: 1 },
+            FrameError::LabelOutOfRange { max: 9, num_classes: 3 },
         ];
         let codes: Vec<u16> = all.iter().map(FrameError::reason_code).collect();
-        assert_eq!(codes, vec![1, 2, 3, 4, 5, 6, 7]);
+        assert_eq!(codes, vec![1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
         let mut names: Vec<&str> = all.iter().map(FrameError::reason).collect();
         names.sort();
         names.dedup();
         assert_eq!(names.len(), all.len());
+    }
+
+    #[test]
+    fn content_checks_refuse_empty_depth_and_unknown_labels() {
+        let p = planes();
+        assert_eq!(frame(&p).check_content(3), Ok(DepthCensus { valid: 48, non_finite: 0 }));
+        let mut empty = planes();
+        empty.depth.fill(0);
+        assert_eq!(frame(&empty).check_content(3), Err(FrameError::DepthEmpty));
+        // f32 depth: all NaN/inf is its own reason; some NaN among readings are holes.
+        let nan = vec![f32::NAN; 48];
+        let mut f = frame(&p);
+        f.depth = DepthPlane::F32(&nan);
+        assert_eq!(f.check_content(3), Err(FrameError::DepthNonFinite { values: 48 }));
+        let mut mixed = vec![0.8f32; 48];
+        mixed[..10].fill(f32::INFINITY);
+        mixed[10] = f32::NAN;
+        f.depth = DepthPlane::F32(&mixed);
+        assert_eq!(f.check_content(3), Ok(DepthCensus { valid: 37, non_finite: 11 }));
+        // Label ids up to num_classes pass; one pixel above is refused; 0 = no limit.
+        let mut labelled = planes();
+        labelled.labels[5] = 3;
+        assert!(frame(&labelled).check_content(3).is_ok());
+        labelled.labels[7] = 4;
+        assert_eq!(frame(&labelled).check_content(3), Err(FrameError::LabelOutOfRange { max: 4, num_classes: 3 }));
+        assert!(frame(&labelled).check_content(0).is_ok());
     }
 
     #[test]

@@ -9,6 +9,7 @@
 //! frame performs no heap allocation. Depends on `fusepose-scene` for object
 //! models and intrinsics; never on the daemon, client or trainer.
 
+pub mod cpu_pin;
 pub mod frame;
 pub mod icp;
 pub mod instances;
@@ -16,10 +17,11 @@ pub mod net;
 pub mod poses;
 pub mod sampling;
 pub mod seg;
+pub mod tracking;
 pub mod workspace;
 
 pub use icp::{IcpConfig, IcpEstimator};
-pub use frame::{ColorFormat, DepthPlane, FrameError, FrameView, LabelPlane};
+pub use frame::{ColorFormat, DepthCensus, DepthPlane, FrameError, FrameView, LabelPlane};
 pub use poses::{ObjectPose, PoseSet};
 pub use workspace::{Instance, PrepareStats, Workspace, WorkspaceConfig, WorkspaceConfigError};
 
@@ -38,6 +40,16 @@ pub trait Estimator: Send {
     /// [`Estimator::estimate`] call only, e.g. when the daemon is behind its
     /// deadline. Estimators without iterations to trade ignore it.
     fn cap_next_frame(&mut self, _max_iterations: usize) {}
+
+    /// The next [`Estimator::estimate`] call should end by `deadline` (None:
+    /// no deadline). Estimators that can trade accuracy for time do so
+    /// (the network: fewer refiner iterations, then fewer points).
+    fn set_deadline(&mut self, _deadline: Option<std::time::Instant>) {}
+
+    /// Whether the last [`Estimator::estimate`] gave up accuracy to meet its deadline.
+    fn degraded(&self) -> bool {
+        false
+    }
 }
 
 /// Why an estimator could not produce poses for a frame.

@@ -55,7 +55,8 @@ pub enum FrameOutcome {
     TooShort,
     /// The client decoder refused the frame (what the daemon counts as invalid).
     Rejected(InvalidReason),
-    /// Decoded, but `Workspace::prepare` refused it (e.g. no label plane).
+    /// Decoded, but the daemon's content check (`FrameView::check_content`) or
+    /// `Workspace::prepare` refused it (e.g. no depth reading, no label plane).
     Refused(FrameError),
     /// Decoded and prepared: this many instances.
     Prepared(usize),
@@ -192,9 +193,23 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
     }
 
     let config = frame_workspace_config();
+    // The daemon's content check (depth readings, label ids) runs before
+    // prepare; here prepare runs either way, for coverage, and the two must agree.
+    let content = view.check_content(config.num_classes);
     let mut ws = Workspace::new(config).expect("fixed config is valid");
     let result = ws.prepare(&view, header.sequence);
     check_workspace(&ws, &view, &result);
+    match &content {
+        Err(FrameError::DepthEmpty | FrameError::DepthNonFinite { .. }) => {
+            assert!(ws.instances.is_empty(), "instances without a single depth reading")
+        }
+        Err(FrameError::LabelOutOfRange { .. }) => assert!(
+            result.is_err() || ws.stats().labels.unknown_class_pixels > 0,
+            "check_content saw an unknown label, prepare did not"
+        ),
+        Err(e) => panic!("check_content gave an unexpected error: {e}"),
+        Ok(census) => assert!(census.valid > 0),
+    }
     let first: Vec<_> = ws.instances.clone();
     let first_points = ws.points.clone();
     let again = ws.prepare(&view, header.sequence);
@@ -207,9 +222,9 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
             .all(|(a, b)| a.to_bits() == b.to_bits()),
         "prepare is not deterministic"
     );
-    match result {
-        Ok(n) => FrameOutcome::Prepared(n),
-        Err(e) => FrameOutcome::Refused(e),
+    match (content, result) {
+        (Err(e), _) | (Ok(_), Err(e)) => FrameOutcome::Refused(e),
+        (Ok(_), Ok(n)) => FrameOutcome::Prepared(n),
     }
 }
 
@@ -299,6 +314,11 @@ pub struct SeedFormat {
 /// A well-formed frame input: header + payload, objects painted as rectangles
 /// of classes 1..=3 with depth around 1 m, a depth hole in one of them.
 pub fn seed_frame(f: SeedFormat) -> Vec<u8> {
+    seed_frame_with(f, |_, metres| metres)
+}
+
+/// [`seed_frame`] with every depth value passed through `depth(pixel, metres)`.
+pub fn seed_frame_with(f: SeedFormat, depth_of: impl Fn(usize, f32) -> f32) -> Vec<u8> {
     use fusepose_client::{ColorFormat as C, DepthFormat as D, FrameLayout, LabelFormat as L};
     let layout = FrameLayout {
         width: f.width,
@@ -341,6 +361,7 @@ pub fn seed_frame(f: SeedFormat) -> Vec<u8> {
             } else {
                 0.9 + 0.01 * (u + v) as f32
             };
+            let metres = depth_of(p, metres);
             if f.depth_f32 {
                 let d = depth.offset as usize + p * 4;
                 payload[d..d + 4].copy_from_slice(&metres.to_le_bytes());
@@ -448,6 +469,7 @@ pub fn model_load(data: &[u8]) -> ModelOutcome {
     let options = NetOptions {
         refine_iterations: None,
         threads: 1,
+        ..NetOptions::default()
     };
     let mut net = match NetEstimator::from_file(file, &objects, options) {
         Ok(n) => n,
@@ -490,12 +512,24 @@ pub fn model_load(data: &[u8]) -> ModelOutcome {
         panic!("estimate failed on a valid frame: {e}");
     }
     let poses = out.len();
-    // The same frame with a focal length validation accepts but that puts
-    // the points at infinity: the network sees inf/NaN and must still return.
-    let extreme = FrameView {
+    // An absurd focal length (points at infinity) is refused by validation
+    // since the fx range check; the smallest accepted one must still estimate.
+    let absurd = FrameView {
         intrinsics: Intrinsics {
             fx: 1e-300,
             fy: 1e-300,
+            ..frame.intrinsics
+        },
+        ..frame
+    };
+    assert!(matches!(
+        ws.prepare(&absurd, 1),
+        Err(FrameError::BadFocalLength { .. })
+    ));
+    let extreme = FrameView {
+        intrinsics: Intrinsics {
+            fx: *fusepose_estimator::frame::FOCAL_RANGE_PX.start(),
+            fy: *fusepose_estimator::frame::FOCAL_RANGE_PX.start(),
             ..frame.intrinsics
         },
         ..frame
@@ -708,16 +742,17 @@ pub fn frame_seeds() -> Vec<(&'static str, Vec<u8>)> {
             "valid_n3_f32depth_u16labels_odd",
             seed_frame(fmt(7, 5, true, Some(true))),
         ),
-        ("valid_n2_unknown_class", unknown),
+        ("refused_unknown_class", unknown),
         ("valid_n0_1x1", seed_frame(fmt(1, 1, false, Some(false)))),
-        ("valid_n3_tiny_fx", edit(&|h| (h.fx, h.cx) = (1e-300, -4.0))),
+        ("reject_tiny_fx", edit(&|h| (h.fx, h.cx) = (1e-300, -4.0))),
+        ("valid_n3_smallest_fx", edit(&|h| (h.fx, h.fy) = (1.0, 1.0))),
         (
             "valid_n1_wide_512x2",
             seed_frame(fmt(512, 2, false, Some(true))),
         ),
         ("refused_no_labels", seed_frame(fmt(8, 6, false, None))),
         ("reject_bad_magic", edit(&|h| h.magic = 0)),
-        ("reject_version", edit(&|h| h.format_version = 2)),
+        ("reject_version", edit(&|h| h.format_version = 99)),
         ("reject_wrong_camera", edit(&|h| h.camera_id ^= 1)),
         ("reject_bad_size", edit(&|h| h.width = 0)),
         (
@@ -743,6 +778,15 @@ pub fn frame_seeds() -> Vec<(&'static str, Vec<u8>)> {
             edit(&|h| h.labels.offset = h.depth.offset),
         ),
         ("reject_truncated", truncated),
+        ("reject_labels_missing", edit(&|h| h.labels.len = 0)),
+        (
+            "refused_all_zero_depth",
+            seed_frame_with(fmt(8, 6, false, Some(false)), |_, _| 0.0),
+        ),
+        (
+            "refused_all_nan_depth",
+            seed_frame_with(fmt(8, 6, true, Some(false)), |_, _| f32::NAN),
+        ),
     ]
 }
 

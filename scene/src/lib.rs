@@ -26,6 +26,7 @@ pub mod export;
 pub mod render;
 pub mod sampler;
 pub mod contact_sheet;
+pub mod overlay;
 pub mod bop;
 pub mod ycbv;
 pub mod metrics;

@@ -120,8 +120,13 @@ pub struct Proc {
 
 impl Proc {
     /// Spawns `cmd` with piped stdout (lines collected) and stderr inherited.
-    pub fn spawn(name: &'static str, mut cmd: Command) -> anyhow::Result<Self> {
-        cmd.stdout(Stdio::piped()).stderr(Stdio::inherit());
+    pub fn spawn(name: &'static str, cmd: Command) -> anyhow::Result<Self> {
+        Self::spawn_with_stderr(name, cmd, Stdio::inherit())
+    }
+
+    /// Spawns `cmd` with piped stdout (lines collected) and the given stderr (e.g. a log file).
+    pub fn spawn_with_stderr(name: &'static str, mut cmd: Command, stderr: Stdio) -> anyhow::Result<Self> {
+        cmd.stdout(Stdio::piped()).stderr(stderr);
         let mut child = cmd.spawn().with_context(|| format!("spawning {name}"))?;
         let stdout = child.stdout.take().context("no stdout")?;
         let (tx, lines) = channel();
@@ -270,6 +275,26 @@ pub fn start_daemon(env: &TestEnv, config: &Path) -> anyhow::Result<Proc> {
     let daemon = Proc::spawn("fuseposed", cmd)?;
     query_stats(env, Duration::from_secs(20)).context("fuseposed never answered a stats request")?;
     Ok(daemon)
+}
+
+/// Spawns `fuseposed --config <config>` in `env`'s namespace without waiting
+/// for it; its log (stderr) goes to `log` when given.
+pub fn spawn_daemon(env: &TestEnv, config: &Path, log: Option<&Path>) -> anyhow::Result<Proc> {
+    let mut cmd = Command::new(daemon_binary()?);
+    cmd.arg("--config").arg(config).current_dir(env.dir.path());
+    let stderr = match log {
+        Some(path) => Stdio::from(std::fs::File::create(path).with_context(|| format!("creating {}", path.display()))?),
+        None => Stdio::inherit(),
+    };
+    Proc::spawn_with_stderr("fuseposed", cmd, stderr)
+}
+
+/// Resident set size of process `pid`, bytes (`VmRSS` of `/proc/<pid>/status`).
+pub fn rss_bytes(pid: i32) -> anyhow::Result<u64> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status"))?;
+    let line = status.lines().find(|l| l.starts_with("VmRSS:")).context("no VmRSS line")?;
+    let kib: u64 = line.split_whitespace().nth(1).context("VmRSS without a value")?.parse()?;
+    Ok(kib * 1024)
 }
 
 /// Asks the daemon for camera `cam0`'s stats, retrying until `timeout`.

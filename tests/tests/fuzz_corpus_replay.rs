@@ -80,14 +80,16 @@ fn frame_seed_rejections_name_their_reason() {
         ("reject_too_large", R::BadSize),
         ("reject_unknown_format", R::UnknownFormat),
         ("reject_label_flag", R::UnknownFormat),
-        ("reject_bad_intrinsics", R::BadIntrinsics),
-        ("reject_principal_point", R::BadIntrinsics),
+        ("reject_bad_intrinsics", R::BadFocalLength),
+        ("reject_tiny_fx", R::BadFocalLength),
+        ("reject_principal_point", R::BadPrincipalPoint),
+        ("reject_labels_missing", R::LabelsMissing),
         ("reject_depth_scale", R::BadDepthScale),
         ("reject_plane_out_of_bounds", R::PlaneOutOfBounds),
         ("reject_plane_length", R::PlaneLength),
         ("reject_plane_misaligned", R::PlaneMisaligned),
         ("reject_plane_overlap", R::PlaneOverlap),
-        ("reject_truncated", R::PlaneOutOfBounds),
+        ("reject_truncated", R::PayloadTruncated),
     ];
     let seeds = harness::frame_seeds();
     for (name, reason) in expect {
@@ -97,6 +99,19 @@ fn frame_seed_rejections_name_their_reason() {
             FrameOutcome::Rejected(reason),
             "{name}"
         );
+    }
+    // Decoded, then refused by the daemon's content check with its own reason.
+    use fusepose_estimator::FrameError as F;
+    for (name, check) in [
+        ("refused_all_zero_depth", (|e: &F| *e == F::DepthEmpty) as fn(&F) -> bool),
+        ("refused_all_nan_depth", |e| matches!(e, F::DepthNonFinite { values: 48 })),
+        ("refused_unknown_class", |e| *e == F::LabelOutOfRange { max: 9, num_classes: 5 }),
+    ] {
+        let (_, bytes) = seeds.iter().find(|(n, _)| *n == name).unwrap();
+        match harness::frame_path(bytes) {
+            FrameOutcome::Refused(e) => assert!(check(&e), "{name}: {e:?}"),
+            other => panic!("{name}: {other:?}"),
+        }
     }
     // Anything shorter than a header is not a frame at all.
     assert_eq!(harness::frame_path(&[0; 127]), FrameOutcome::TooShort);

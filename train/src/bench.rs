@@ -34,6 +34,7 @@ pub fn engine_speed(
         NetOptions {
             refine_iterations: None,
             threads,
+            ..NetOptions::default()
         },
     )?;
     let c = file.config.clone();

@@ -106,6 +106,9 @@ fn segment_labels_are_argmax_of_burn_logits() {
     let path = dir.path().join("seg.safetensors");
     let net = save_random(&cfg, &set, &path);
     let mut engine = SegEngine::load(&path, &set).unwrap();
+    // Plain argmax: no fragment removal (tested in the engine's unit tests).
+    engine.set_min_component_cells(0);
+    engine.set_erode(false);
     // A 640x480 frame with smooth structure so the logits vary across cells.
     let (w, h) = (640usize, 480usize);
     let color: Vec<u8> =
@@ -196,4 +199,57 @@ fn smoke_training() {
     assert!(r.last_loss < r.first_loss, "loss did not fall");
     assert!(r.validation.miou > 0.0);
     assert!(SegEngine::load(&out, &fusepose_scene::builtin::builtin_objects()).is_ok());
+}
+
+fn save_random_pose_net(set: &ObjectSet, path: &std::path::Path) {
+    let cfg = fusepose_estimator::net::NetConfig::new(set.len());
+    let net = fusepose_train::model::FusionNet::new(&cfg, &Device::flex());
+    fusepose_train::store::save(&net, &cfg, &object_entries(set), &TrainRecord::default(), path).unwrap();
+}
+
+#[test]
+fn segmenter_embeds_into_the_pose_network_file() {
+    use fusepose_estimator::net::WeightFile;
+    use fusepose_estimator::seg::file::embed;
+    let set = three_objects();
+    let cfg = SegConfig::new(3);
+    let dir = Scratch::new("embed");
+    let (pose, seg) = (dir.path().join("pose.safetensors"), dir.path().join("seg.safetensors"));
+    save_random_pose_net(&set, &pose);
+    save_random(&cfg, &set, &seg);
+    // A pose-network file without a segmenter says so.
+    assert!(matches!(SegFile::read(&pose), Err(NetLoadError::NoSegmenter)));
+
+    let seg_file = SegFile::read(&seg).unwrap();
+    let pose_bytes = std::fs::read(&pose).unwrap();
+    let both = embed(&pose_bytes, &seg_file).unwrap();
+    // Embedding again replaces, it does not duplicate.
+    let again = embed(&both, &seg_file).unwrap();
+    assert_eq!(again.len(), both.len());
+    let combined = dir.path().join("both.safetensors");
+    std::fs::write(&combined, &both).unwrap();
+
+    // The pose network is untouched, the segmenter reads back identically.
+    let (before, after) = (WeightFile::from_bytes(&pose_bytes).unwrap(), WeightFile::read(&combined).unwrap());
+    for (name, _) in before.config.tensor_shapes() {
+        assert_eq!(before.tensor(&name).unwrap(), after.tensor(&name).unwrap(), "{name}");
+    }
+    let embedded = SegFile::read(&combined).unwrap();
+    assert_eq!(embedded.config, seg_file.config);
+    assert_eq!(embedded.objects, seg_file.objects);
+    for (name, _) in cfg.tensor_shapes() {
+        assert_eq!(embedded.tensor(&name).unwrap(), seg_file.tensor(&name).unwrap(), "{name}");
+    }
+    let input = random_input(&cfg, 5);
+    let mut a = SegEngine::load(&seg, &set).unwrap();
+    let mut b = SegEngine::load(&combined, &set).unwrap();
+    assert_eq!(a.forward(&input).unwrap(), b.forward(&input).unwrap());
+
+    // A pose network for other objects (same count, other order) refuses the segmenter.
+    let mut swapped = three_objects();
+    swapped.objects.swap(1, 2);
+    let other = dir.path().join("other.safetensors");
+    save_random_pose_net(&swapped, &other);
+    let err = embed(&std::fs::read(&other).unwrap(), &seg_file).unwrap_err();
+    assert!(matches!(err, NetLoadError::ObjectMismatch { class: 2, what: "name", .. }), "{err}");
 }

@@ -140,7 +140,7 @@ fn load_net(args: &EstimatorArgs, set: &fusepose_scene::ObjectSet, notes: &mut V
             }
         }
     };
-    let options = NetOptions { refine_iterations: None, threads: args.threads.clamp(1, 2) };
+    let options = NetOptions { refine_iterations: None, threads: args.threads.clamp(1, 2), ..NetOptions::default() };
     match NetEstimator::from_file(file, set, options) {
         Ok(est) => Some(est),
         Err(e) => {

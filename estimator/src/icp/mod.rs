@@ -34,7 +34,7 @@
 //! [`IcpEstimator::new`]; per-instance scratch buffers are sized on the first
 //! call for the workspace's N and reused (grow only if N grows).
 
-mod model_cloud;
+pub(crate) mod model_cloud;
 pub mod rotation_grid;
 
 use fusepose_scene::ObjectSet;

@@ -142,6 +142,9 @@ const RTRA: usize = 8;
 #[derive(Clone, Debug)]
 pub struct Scratch {
     n: usize,
+    /// Points the next passes use: the first `active` of the `n` sampled
+    /// (a uniform random subset: sampling is a partial Fisher–Yates shuffle).
+    active: usize,
     s: usize,
     crop: Vec<f32>,
     points: Array2<f32>,
@@ -193,6 +196,7 @@ impl Scratch {
         let z = |r: usize, k: usize| Array2::<f32>::zeros((r, k));
         Self {
             n,
+            active: n,
             s,
             crop: vec![0.0; 3 * s * s],
             points: z(n, 3),
@@ -225,6 +229,23 @@ impl Scratch {
             rrot: z(1, 4),
             rtra: z(1, 3),
         }
+    }
+
+    /// Uses only the first `m` points (clamped to 1..=N) from now on: the
+    /// network is per point plus an average pool, so fewer points cost
+    /// proportionally less (a degraded mode under overload).
+    pub fn set_active_points(&mut self, m: usize) {
+        self.active = m.clamp(1, self.n.max(1));
+    }
+
+    /// Points the passes use (see [`Scratch::set_active_points`]).
+    pub fn active_points(&self) -> usize {
+        self.active
+    }
+
+    /// Points the buffers hold (N).
+    pub fn points(&self) -> usize {
+        self.n
     }
 
     /// Whether these buffers fit `n` points and `s`×`s` crops exactly.
@@ -355,7 +376,8 @@ impl Engine {
         self.d1.run(&sc.cat, h, h, 1, &mut sc.cols, &mut sc.d1);
         // Gather at the chosen pixels: d1 at (row/2, col/2) (nearest upsampling), e1 at (row, col).
         let emb = c.emb;
-        for (i, &px) in sc.choose.iter().enumerate() {
+        let m = sc.active;
+        for (i, &px) in sc.choose.iter().enumerate().take(m) {
             let px = (px as usize).min(s * s - 1);
             let (row, col) = (px / s, px % s);
             let half = (row / 2) * h + col / 2;
@@ -367,25 +389,25 @@ impl Engine {
                 r[emb + ch] = sc.e1[ch * s * s + px];
             }
         }
-        self.d2.run(sc.d2in.view(), true, sc.emb.view_mut());
+        self.d2.run(sc.d2in.slice(s![..m, ..]), true, sc.emb.slice_mut(s![..m, ..]));
     }
 
     /// Pose net on `sc.points` and `sc.emb` for class index `k` (0-based): fills
     /// `sc.quat`, `sc.trans`, `sc.conf`; returns the index of the most confident point.
     pub fn pose(&self, sc: &mut Scratch, k: usize) -> usize {
         let c = &self.config;
-        let n = sc.n;
+        let n = sc.active;
         let [g0, g1w] = c.geo;
         let [c0, c1w] = c.col;
         // Centred, scaled geometry.
         let mut mean = [0.0f32; 3];
-        for r in sc.points.rows() {
+        for r in sc.points.slice(s![..n, ..]).rows() {
             for j in 0..3 {
                 mean[j] += r[j];
             }
         }
         mean.iter_mut().for_each(|m| *m /= n as f32);
-        for (mut g, p) in sc.gx.rows_mut().into_iter().zip(sc.points.rows()) {
+        for (mut g, p) in sc.gx.rows_mut().into_iter().zip(sc.points.slice(s![..n, ..]).rows()) {
             for j in 0..3 {
                 g[j] = (p[j] - mean[j]) * c.geo_scale;
             }
@@ -393,40 +415,40 @@ impl Engine {
         let (a, b) = (g0, g0 + c0);
         debug_assert_eq!(b + g1w + c1w, c.local_width());
         {
-            let (left, right) = sc.local.view_mut().split_at(Axis(1), b);
+            let (left, right) = sc.local.slice_mut(s![..n, ..]).split_at(Axis(1), b);
             let (mut l_g1, mut l_c1) = left.split_at(Axis(1), a);
-            self.p[G1].run(sc.gx.view(), true, l_g1.view_mut());
-            self.p[C1].run(sc.emb.view(), true, l_c1.view_mut());
+            self.p[G1].run(sc.gx.slice(s![..n, ..]), true, l_g1.view_mut());
+            self.p[C1].run(sc.emb.slice(s![..n, ..]), true, l_c1.view_mut());
             let (l_g2, l_c2) = right.split_at(Axis(1), g1w);
             self.p[G2].run(l_g1.view(), true, l_g2);
             self.p[C2].run(l_c1.view(), true, l_c2);
         }
-        self.p[L1].run(sc.local.slice(s![.., b..]), true, sc.l1.view_mut());
-        self.p[L2].run(sc.l1.view(), true, sc.l2.view_mut());
-        mean_rows(sc.l2.view(), sc.glob.view_mut());
+        self.p[L1].run(sc.local.slice(s![..n, b..]), true, sc.l1.slice_mut(s![..n, ..]));
+        self.p[L2].run(sc.l1.slice(s![..n, ..]), true, sc.l2.slice_mut(s![..n, ..]));
+        mean_rows(sc.l2.slice(s![..n, ..]), sc.glob.view_mut());
         self.p[H1G].run(sc.glob.view(), false, sc.hg.view_mut());
         // h1 = relu(local · W + b + global · W_g): the global term is one row, added as a bias.
         let b1 = self.p[H1L].b.as_ref().expect("h1_local has a bias");
-        for mut r in sc.h1.rows_mut() {
+        for mut r in sc.h1.slice_mut(s![..n, ..]).rows_mut() {
             for ((d, &bv), &gv) in r.iter_mut().zip(b1.iter()).zip(sc.hg.row(0).iter()) {
                 *d = bv + gv;
             }
         }
-        gemm_acc(sc.local.view(), self.p[H1L].w.view(), &mut sc.h1.view_mut());
-        sc.h1.mapv_inplace(|v| v.max(0.0));
-        self.p[H2].run(sc.h1.view(), true, sc.h2.view_mut());
-        self.p[ROT].run_cols(sc.h2.view(), k, 4, sc.quat.view_mut());
-        self.p[TRA].run_cols(sc.h2.view(), k, 3, sc.trans.view_mut());
-        self.p[CONF].run_cols(sc.h2.view(), k, 1, sc.conf.view_mut());
+        gemm_acc(sc.local.slice(s![..n, ..]), self.p[H1L].w.view(), &mut sc.h1.slice_mut(s![..n, ..]));
+        sc.h1.slice_mut(s![..n, ..]).mapv_inplace(|v| v.max(0.0));
+        self.p[H2].run(sc.h1.slice(s![..n, ..]), true, sc.h2.slice_mut(s![..n, ..]));
+        self.p[ROT].run_cols(sc.h2.slice(s![..n, ..]), k, 4, sc.quat.slice_mut(s![..n, ..]));
+        self.p[TRA].run_cols(sc.h2.slice(s![..n, ..]), k, 3, sc.trans.slice_mut(s![..n, ..]));
+        self.p[CONF].run_cols(sc.h2.slice(s![..n, ..]), k, 1, sc.conf.slice_mut(s![..n, ..]));
         let os = c.offset_scale;
-        for (mut t, p) in sc.trans.rows_mut().into_iter().zip(sc.points.rows()) {
+        for (mut t, p) in sc.trans.rows_mut().into_iter().zip(sc.points.slice(s![..n, ..]).rows()) {
             for j in 0..3 {
                 t[j] = p[j] + t[j] * os;
             }
         }
         let mut best = 0;
         let mut best_c = f32::NEG_INFINITY;
-        for (i, v) in sc.conf.iter_mut().enumerate() {
+        for (i, v) in sc.conf.slice_mut(s![..n, ..]).iter_mut().enumerate() {
             *v = 1.0 / (1.0 + (-*v).exp());
             if *v > best_c {
                 best_c = *v;
@@ -440,9 +462,10 @@ impl Engine {
     pub fn refine_color(&self, sc: &mut Scratch) {
         let c = &self.config;
         let (a, b) = (c.geo[0], c.geo[0] + c.col[0]);
-        let (left, right) = sc.rlocal.view_mut().split_at(Axis(1), b);
+        let m = sc.active;
+        let (left, right) = sc.rlocal.slice_mut(s![..m, ..]).split_at(Axis(1), b);
         let (_, mut l_c1) = left.split_at(Axis(1), a);
-        self.r[C1].run(sc.emb.view(), true, l_c1.view_mut());
+        self.r[C1].run(sc.emb.slice(s![..m, ..]), true, l_c1.view_mut());
         let (_, l_c2) = right.split_at(Axis(1), c.geo[1]);
         self.r[C2].run(l_c1.view(), true, l_c2);
     }
@@ -456,7 +479,8 @@ impl Engine {
         trans: &Vector3<f32>,
     ) -> (Matrix3<f32>, Vector3<f32>) {
         let c = &self.config;
-        for (mut g, p) in sc.gx.rows_mut().into_iter().zip(sc.points.rows()) {
+        let m = sc.active;
+        for (mut g, p) in sc.gx.rows_mut().into_iter().zip(sc.points.slice(s![..m, ..]).rows()) {
             let d = Vector3::new(p[0] - trans.x, p[1] - trans.y, p[2] - trans.z);
             let o = rot.transpose() * d;
             for j in 0..3 {
@@ -465,15 +489,15 @@ impl Engine {
         }
         let (a, b) = (c.geo[0], c.geo[0] + c.col[0]);
         {
-            let (left, right) = sc.rlocal.view_mut().split_at(Axis(1), b);
+            let (left, right) = sc.rlocal.slice_mut(s![..m, ..]).split_at(Axis(1), b);
             let (mut l_g1, _) = left.split_at(Axis(1), a);
-            self.r[G1].run(sc.gx.view(), true, l_g1.view_mut());
+            self.r[G1].run(sc.gx.slice(s![..m, ..]), true, l_g1.view_mut());
             let (l_g2, _) = right.split_at(Axis(1), c.geo[1]);
             self.r[G2].run(l_g1.view(), true, l_g2);
         }
-        self.r[L1].run(sc.rlocal.view(), true, sc.rl1.view_mut());
-        self.r[L2].run(sc.rl1.view(), true, sc.rl2.view_mut());
-        mean_rows(sc.rl2.view(), sc.rglob.view_mut());
+        self.r[L1].run(sc.rlocal.slice(s![..m, ..]), true, sc.rl1.slice_mut(s![..m, ..]));
+        self.r[L2].run(sc.rl1.slice(s![..m, ..]), true, sc.rl2.slice_mut(s![..m, ..]));
+        mean_rows(sc.rl2.slice(s![..m, ..]), sc.rglob.view_mut());
         self.r[RM1].run(sc.rglob.view(), true, sc.rm.view_mut());
         self.r[RROT].run_cols(sc.rm.view(), k, 4, sc.rrot.view_mut());
         self.r[RTRA].run_cols(sc.rm.view(), k, 3, sc.rtra.view_mut());

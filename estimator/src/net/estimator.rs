@@ -7,17 +7,27 @@
 //! from the network config and re-sized only if a workspace with another N, S
 //! or instance capacity shows up (the warm-up frame), so steady-state frames
 //! do not allocate.
+//!
+//! Deadlines ([`Estimator::set_deadline`]): a frame plan from the learned
+//! per-stage costs ([`super::budget`]) picks the refiner iterations (then the
+//! points) that fit the remaining time, and each refiner iteration checks the
+//! clock again. Tracking ([`crate::tracking`], optional): an object with a
+//! good fit in the previous frame starts the refiner from that pose and skips
+//! the pose net while the fit stays good.
 
 use std::path::Path;
 use std::sync::{Arc, Condvar, Mutex};
 use std::thread::JoinHandle;
+use std::time::{Duration, Instant};
 
 use fusepose_scene::ObjectSet;
-use nalgebra::{UnitQuaternion, Vector3};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use ndarray::s;
 
+use super::budget::{self, CostModel, FramePlan, ObjectTimes};
 use super::engine::{Engine, Scratch, quat_matrix, unit_quat};
 use super::weights::{NetLoadError, WeightFile};
+use crate::tracking::{FitCheck, Prior, TrackOutcome, TrackingConfig, Tracks};
 use crate::{EstimateError, Estimator, FrameView, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
 
 /// Load-time options.
@@ -27,6 +37,10 @@ pub struct NetOptions {
     pub refine_iterations: Option<usize>,
     /// Threads per frame: 1 (caller only) or 2 (caller + one persistent worker).
     pub threads: usize,
+    /// Tracking mode (None: every frame runs the full estimate).
+    pub tracking: Option<TrackingConfig>,
+    /// Pin the worker thread to this CPU (None: no pinning).
+    pub pin_worker_cpu: Option<usize>,
 }
 
 impl Default for NetOptions {
@@ -35,57 +49,138 @@ impl Default for NetOptions {
         Self {
             refine_iterations: None,
             threads: cores.clamp(1, 2),
+            tracking: None,
+            pin_worker_cpu: None,
         }
     }
 }
 
-/// Runs instance `i` of `ws` through the network.
+/// What one thread needs besides the engine, scratch and workspace.
+#[derive(Clone, Copy)]
+struct FrameJob<'a> {
+    plan: FramePlan,
+    deadline: Option<Instant>,
+    /// Estimated cost of one refiner iteration at the plan's points, ns.
+    iter_ns: f64,
+    fit: Option<&'a FitCheck>,
+    max_fit_m: f64,
+    tracking_iterations: usize,
+}
+
+/// One instance's pose with how it was obtained.
+#[derive(Clone, Copy, Debug)]
+struct InstanceResult {
+    pose: ObjectPose,
+    prior: Prior,
+    outcome: TrackOutcome,
+    times: ObjectTimes,
+}
+
+fn since(t: &mut Instant) -> Duration {
+    let now = Instant::now();
+    let d = now - *t;
+    *t = now;
+    d
+}
+
+/// Refiner iterations from `(rot, t)` while the deadline allows; returns how many ran.
+fn refine_loop(
+    engine: &Engine,
+    sc: &mut Scratch,
+    k: usize,
+    rot: &mut Matrix3<f32>,
+    t: &mut Vector3<f32>,
+    iterations: usize,
+    job: &FrameJob<'_>,
+) -> usize {
+    let mut done = 0;
+    while done < iterations && budget::iteration_fits(job.deadline, job.iter_ns) {
+        (*rot, *t) = engine.refine(sc, k, rot, t);
+        done += 1;
+    }
+    done
+}
+
+/// Runs instance `i` of `ws` through the network (from `prior` when tracking).
 fn estimate_instance(
     engine: &Engine,
     sc: &mut Scratch,
     ws: &Workspace,
     i: usize,
-    iters: usize,
-) -> ObjectPose {
+    prior: Option<Prior>,
+    job: &FrameJob<'_>,
+) -> InstanceResult {
     let inst = ws.instances[i];
     let k = inst.class_id as usize - 1;
+    let mut times = ObjectTimes { points: job.plan.points, full_points: sc.points(), ..ObjectTimes::default() };
+    let mut clock = Instant::now();
     engine.set_inputs(
         sc,
         ws.crops.slice(s![i, .., .., ..]),
         ws.points.slice(s![i, .., ..]),
         ws.choose.slice(s![i, ..]),
     );
+    sc.set_active_points(job.plan.points);
     engine.color(sc);
+    times.color = since(&mut clock);
+    let observed = ws.points.slice(s![i, ..job.plan.points.min(ws.points.dim().1), ..]);
+    let fit_of = |rot: &Matrix3<f32>, t: &Vector3<f32>| job.fit.map_or(f64::NAN, |f| f.fit_m(k, observed, rot, t));
+
+    let mut refine_ready = false;
+    if let Some(prior) = prior {
+        // Tracking: the refiner from last frame's pose; kept if the fit stays good.
+        engine.refine_color(sc);
+        times.refine_setup = since(&mut clock);
+        refine_ready = true;
+        let (mut rot, mut t) = (prior.rotation, prior.translation);
+        let iterations = job.tracking_iterations.min(job.plan.refine_iterations.max(1));
+        let done = refine_loop(engine, sc, k, &mut rot, &mut t, iterations, job);
+        times.refine = since(&mut clock);
+        times.refine_iterations = done;
+        let fit_m = fit_of(&rot, &t);
+        if fit_m <= job.max_fit_m {
+            let pose = finish_pose(inst, i, &rot, &t, prior.confidence, done);
+            let prior = Prior { rotation: rot, translation: t, confidence: prior.confidence };
+            // No pose net ran: keep its cost model out of this object's times.
+            times.pose = Duration::ZERO;
+            return InstanceResult { pose, prior, outcome: TrackOutcome { tracked: true, fit_m }, times };
+        }
+    }
     let best = engine.pose(sc, k);
-    let q = [
-        sc.quat[[best, 0]],
-        sc.quat[[best, 1]],
-        sc.quat[[best, 2]],
-        sc.quat[[best, 3]],
-    ];
+    times.pose = since(&mut clock);
+    let q = [sc.quat[[best, 0]], sc.quat[[best, 1]], sc.quat[[best, 2]], sc.quat[[best, 3]]];
     let confidence = sc.conf[[best, 0]];
     let mut rot = quat_matrix(q);
-    let mut t = Vector3::new(
-        sc.trans[[best, 0]],
-        sc.trans[[best, 1]],
-        sc.trans[[best, 2]],
-    );
-    let mut rotation = unit_quat(q);
-    if iters > 0 {
-        engine.refine_color(sc);
-        for _ in 0..iters {
-            (rot, t) = engine.refine(sc, k, &rot, &t);
+    let mut t = Vector3::new(sc.trans[[best, 0]], sc.trans[[best, 1]], sc.trans[[best, 2]]);
+    let mut done = 0;
+    if job.plan.refine_iterations > 0 && budget::iteration_fits(job.deadline, job.iter_ns) {
+        if !refine_ready {
+            engine.refine_color(sc);
+            times.refine_setup = since(&mut clock);
         }
-        // Bounded: `from_matrix` iterates until convergence, which never comes
-        // for a non-finite matrix (e.g. from NaN weights), and hung `estimate`
-        // forever (found with the `model` fuzz harness, docs/RELIABILITY.md).
-        rotation = UnitQuaternion::from_matrix_eps(
-            &rot.cast::<f64>(),
-            f64::EPSILON,
-            1000,
-            UnitQuaternion::identity(),
-        );
+        done = refine_loop(engine, sc, k, &mut rot, &mut t, job.plan.refine_iterations, job);
+        times.refine = since(&mut clock);
     }
+    times.refine_iterations = done;
+    let mut pose = finish_pose(inst, i, &rot, &t, confidence, done);
+    if done == 0 {
+        // The pose net's own quaternion (no matrix round trip).
+        pose.rotation = unit_quat(q);
+    }
+    let fit_m = if job.fit.is_some() { fit_of(&rot, &t) } else { f64::NAN };
+    InstanceResult {
+        pose,
+        prior: Prior { rotation: rot, translation: t, confidence },
+        outcome: TrackOutcome { tracked: false, fit_m },
+        times,
+    }
+}
+
+fn finish_pose(inst: crate::Instance, i: usize, rot: &Matrix3<f32>, t: &Vector3<f32>, confidence: f32, iterations: usize) -> ObjectPose {
+    // Bounded: `from_matrix` iterates until convergence, which never comes
+    // for a non-finite matrix (e.g. from NaN weights), and hung `estimate`
+    // forever (found with the `model` fuzz harness, docs/RELIABILITY.md).
+    let rotation = UnitQuaternion::from_matrix_eps(&rot.cast::<f64>(), f64::EPSILON, 1000, UnitQuaternion::identity());
     ObjectPose {
         class_id: inst.class_id,
         instance_id: i as u16,
@@ -94,19 +189,26 @@ fn estimate_instance(
         confidence,
         mask_pixels: inst.pixels,
         bbox: inst.bbox,
-        iterations: iters as u16,
+        iterations: iterations as u16,
     }
 }
 
 /// A frame's share of work for the worker: instances `1, 3, 5, …` of `*ws`.
 struct Task {
     ws: *const Workspace,
-    iters: usize,
+    /// Tracking priors per instance (same length as the instances).
+    priors: *const [Option<Prior>],
+    plan: FramePlan,
+    deadline: Option<Instant>,
+    iter_ns: f64,
+    max_fit_m: f64,
+    tracking_iterations: usize,
+    check_fit: bool,
 }
 
 // SAFETY: the caller blocks until the worker reports the task done (also when
-// unwinding, see `WaitGuard`), so `*ws` outlives every access; `Workspace` is
-// plain data read concurrently by both threads and written by neither.
+// unwinding, see `WaitGuard`), so `*ws` and `*priors` outlive every access;
+// both are plain data read concurrently by both threads and written by neither.
 unsafe impl Send for Task {}
 
 enum Msg {
@@ -157,7 +259,7 @@ impl<T> Slot<T> {
 struct Shared {
     msg: Slot<Msg>,
     done: Slot<bool>,
-    results: Mutex<Vec<ObjectPose>>,
+    results: Mutex<Vec<InstanceResult>>,
 }
 
 struct Worker {
@@ -166,7 +268,7 @@ struct Worker {
 }
 
 impl Worker {
-    fn spawn(engine: Arc<Engine>, n: usize, s: usize, cap: usize) -> Option<Self> {
+    fn spawn(engine: Arc<Engine>, fit: Option<Arc<FitCheck>>, pin: Option<usize>, n: usize, s: usize, cap: usize) -> Option<Self> {
         let shared = Arc::new(Shared {
             msg: Slot::new(),
             done: Slot::new(),
@@ -176,19 +278,30 @@ impl Worker {
         let handle = std::thread::Builder::new()
             .name("fusepose-net".into())
             .spawn(move || {
+                if let Some(cpu) = pin
+                    && let Err(e) = crate::cpu_pin::pin_current_thread(cpu)
+                {
+                    tracing::warn!(cpu, error = %e, "cannot pin the network worker thread");
+                }
                 let mut sc = Scratch::new(&engine.config, n, s);
                 loop {
                     match sh.msg.take() {
                         Msg::Run(task) => {
                             let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                                 // SAFETY: see `Task`.
-                                let ws = unsafe { &*task.ws };
+                                let (ws, priors) = unsafe { (&*task.ws, &*task.priors) };
+                                let job = FrameJob {
+                                    plan: task.plan,
+                                    deadline: task.deadline,
+                                    iter_ns: task.iter_ns,
+                                    fit: fit.as_deref().filter(|_| task.check_fit),
+                                    max_fit_m: task.max_fit_m,
+                                    tracking_iterations: task.tracking_iterations,
+                                };
                                 let mut out = sh.results.lock().unwrap_or_else(|e| e.into_inner());
                                 out.clear();
                                 for i in (1..ws.instances.len()).step_by(2) {
-                                    out.push(estimate_instance(
-                                        &engine, &mut sc, ws, i, task.iters,
-                                    ));
+                                    out.push(estimate_instance(&engine, &mut sc, ws, i, priors[i], &job));
                                 }
                             }))
                             .is_ok();
@@ -245,6 +358,19 @@ impl Drop for WaitGuard<'_> {
     }
 }
 
+/// Counters of what the estimator did, since load.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct NetCounters {
+    /// Objects estimated.
+    pub objects: u64,
+    /// Objects whose tracked pose was kept (no pose net).
+    pub tracked: u64,
+    /// Frames whose plan gave up refiner iterations or points.
+    pub degraded_frames: u64,
+    /// Objects run on fewer than N points.
+    pub reduced_point_objects: u64,
+}
+
 /// The fusion-network estimator.
 pub struct NetEstimator {
     engine: Arc<Engine>,
@@ -253,9 +379,17 @@ pub struct NetEstimator {
     worker: Option<Worker>,
     /// Sizes the buffers were made for: (N, S, max instances).
     sizes: (usize, usize, usize),
-    mine: Vec<ObjectPose>,
+    mine: Vec<InstanceResult>,
     refine_iterations: usize,
     frame_cap: Option<usize>,
+    deadline: Option<Instant>,
+    costs: CostModel,
+    last_plan: FramePlan,
+    last_degraded: bool,
+    tracks: Option<Tracks>,
+    fit: Option<Arc<FitCheck>>,
+    priors: Vec<Option<Prior>>,
+    counters: NetCounters,
 }
 
 impl NetEstimator {
@@ -282,8 +416,10 @@ impl NetEstimator {
         let (n, s, cap) = (c.num_points, c.crop_size, 8);
         let scratch = Scratch::new(c, n, s);
         let refine_iterations = options.refine_iterations.unwrap_or(c.refine_iters);
+        let fit = options.tracking.map(|_| Arc::new(FitCheck::new(objects)));
+        let tracks = options.tracking.map(|t| Tracks::new(t, c.num_classes));
         let worker = if options.threads >= 2 {
-            Worker::spawn(engine.clone(), n, s, cap)
+            Worker::spawn(engine.clone(), fit.clone(), options.pin_worker_cpu, n, s, cap)
         } else {
             None
         };
@@ -296,6 +432,14 @@ impl NetEstimator {
             mine: Vec::with_capacity(cap),
             refine_iterations,
             frame_cap: None,
+            deadline: None,
+            costs: CostModel::default(),
+            last_plan: FramePlan::full(refine_iterations, n),
+            last_degraded: false,
+            tracks,
+            fit,
+            priors: Vec::with_capacity(cap),
+            counters: NetCounters::default(),
         })
     }
 
@@ -340,6 +484,27 @@ impl NetEstimator {
         self.frame_cap = Some(max_refine_iterations);
     }
 
+    /// The plan the last frame ran with (refiner iterations, points).
+    pub fn last_plan(&self) -> FramePlan {
+        self.last_plan
+    }
+
+    /// The learned per-object stage costs.
+    pub fn costs(&self) -> &CostModel {
+        &self.costs
+    }
+
+    pub fn counters(&self) -> NetCounters {
+        self.counters
+    }
+
+    /// Forgets every track (tracking mode), e.g. when the camera jumped.
+    pub fn reset_tracks(&mut self) {
+        if let Some(t) = self.tracks.as_mut() {
+            t.clear();
+        }
+    }
+
     fn fit(&mut self, ws: &Workspace) {
         let want = (
             ws.config.num_points,
@@ -354,11 +519,38 @@ impl NetEstimator {
             self.scratch = Scratch::new(&self.engine.config, n, s);
         }
         self.mine.reserve(cap);
+        self.priors.reserve(cap);
         if let Some(w) = &self.worker {
             w.shared.msg.put(Msg::Resize(n, s, cap));
             w.shared.done.take();
         }
         self.sizes = want;
+    }
+
+    /// Priors of this frame's instances (tracking): a class seen twice is not tracked.
+    fn gather_priors(&mut self, ws: &Workspace) {
+        self.priors.clear();
+        let Some(tracks) = self.tracks.as_mut() else {
+            self.priors.resize(ws.instances.len(), None);
+            return;
+        };
+        tracks.begin_frame();
+        for (i, inst) in ws.instances.iter().enumerate() {
+            let duplicate = ws.instances.iter().enumerate().any(|(j, o)| j != i && o.class_id == inst.class_id);
+            self.priors.push(if duplicate { None } else { tracks.prior(inst.class_id) });
+        }
+    }
+
+    /// Folds one frame's results into the costs, counters and tracks; writes the poses.
+    fn absorb(&mut self, result: &InstanceResult, out: &mut PoseSet) {
+        self.costs.observe(&result.times);
+        self.counters.objects += 1;
+        self.counters.tracked += result.outcome.tracked as u64;
+        self.counters.reduced_point_objects += (result.times.points < result.times.full_points) as u64;
+        if let Some(tracks) = self.tracks.as_mut() {
+            tracks.update(result.pose.class_id, result.prior, result.outcome);
+        }
+        out.push(result.pose);
     }
 }
 
@@ -371,6 +563,14 @@ impl Estimator for NetEstimator {
         NetEstimator::cap_next_frame(self, max_iterations);
     }
 
+    fn set_deadline(&mut self, deadline: Option<Instant>) {
+        self.deadline = deadline;
+    }
+
+    fn degraded(&self) -> bool {
+        self.last_degraded
+    }
+
     fn estimate(
         &mut self,
         _frame: &FrameView<'_>,
@@ -378,10 +578,11 @@ impl Estimator for NetEstimator {
         out: &mut PoseSet,
     ) -> Result<(), EstimateError> {
         out.clear();
-        let iters = self
+        let max_iterations = self
             .frame_cap
             .take()
             .map_or(self.refine_iterations, |c| c.min(self.refine_iterations));
+        let deadline = self.deadline;
         let k_max = self.engine.config.num_classes;
         if let Some(bad) = ws
             .instances
@@ -393,50 +594,70 @@ impl Estimator for NetEstimator {
         self.fit(ws);
         let count = ws.instances.len();
         let ws: &Workspace = ws;
+        self.gather_priors(ws);
+        let threads = if count >= 2 { self.threads() } else { 1 };
+        let full_points = self.scratch.points();
+        let remaining = deadline.map(|d| d.saturating_duration_since(Instant::now()));
+        let plan = budget::plan(&self.costs, remaining, count.div_ceil(threads), max_iterations, full_points);
+        self.last_plan = plan;
+        self.last_degraded = plan.is_degraded(max_iterations, full_points);
+        self.counters.degraded_frames += self.last_degraded as u64;
+        let tracking = self.tracks.as_ref().map(|t| *t.config());
+        let (max_fit_m, tracking_iterations) = tracking.map_or((f64::NAN, 0), |t| (t.max_fit_m, t.refine_iterations.max(1)));
+        let iter_ns = self.costs.refine_iter_ns(plan.points, full_points);
+        let fit = self.fit.clone();
+        let job = FrameJob {
+            plan,
+            deadline,
+            iter_ns,
+            fit: fit.as_deref(),
+            max_fit_m,
+            tracking_iterations,
+        };
         self.mine.clear();
-        if count >= 2
+        let mut mine = std::mem::take(&mut self.mine);
+        if threads == 2
             && let Some(w) = self.worker.as_ref()
         {
-            w.shared.msg.put(Msg::Run(Task { ws, iters }));
+            w.shared.msg.put(Msg::Run(Task {
+                ws,
+                priors: self.priors.as_slice(),
+                plan,
+                deadline,
+                iter_ns,
+                max_fit_m,
+                tracking_iterations,
+                check_fit: job.fit.is_some(),
+            }));
             let guard = WaitGuard {
                 shared: &w.shared,
                 ok: None,
             };
             for i in (0..count).step_by(2) {
-                self.mine.push(estimate_instance(
-                    &self.engine,
-                    &mut self.scratch,
-                    ws,
-                    i,
-                    iters,
-                ));
+                mine.push(estimate_instance(&self.engine, &mut self.scratch, ws, i, self.priors[i], &job));
             }
             let ok = guard.wait();
-            let theirs = w.shared.results.lock().unwrap_or_else(|e| e.into_inner());
+            let shared = w.shared.clone();
+            let theirs = shared.results.lock().unwrap_or_else(|e| e.into_inner());
             if ok && theirs.len() == count / 2 {
                 for i in 0..count {
-                    out.push(if i % 2 == 0 {
-                        self.mine[i / 2]
-                    } else {
-                        theirs[i / 2]
-                    });
+                    let r = if i % 2 == 0 { mine[i / 2] } else { theirs[i / 2] };
+                    self.absorb(&r, out);
                 }
+                self.mine = mine;
                 return Ok(());
             }
             // The worker panicked: this frame and later ones run on the caller's thread.
             drop(theirs);
             self.worker = None;
             out.clear();
+            mine.clear();
         }
         for i in 0..count {
-            out.push(estimate_instance(
-                &self.engine,
-                &mut self.scratch,
-                ws,
-                i,
-                iters,
-            ));
+            let r = estimate_instance(&self.engine, &mut self.scratch, ws, i, self.priors[i], &job);
+            self.absorb(&r, out);
         }
+        self.mine = mine;
         Ok(())
     }
 }

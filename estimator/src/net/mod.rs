@@ -7,6 +7,7 @@
 //! GEMM + bias + ReLU, im2col convolutions), [`engine`] (the forward pass),
 //! [`estimator`] (the [`crate::Estimator`] implementation).
 
+pub mod budget;
 pub mod config;
 pub mod engine;
 pub mod estimator;

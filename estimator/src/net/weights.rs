@@ -32,6 +32,8 @@ pub enum NetLoadError {
     },
     #[error("tensor `{0}` is missing")]
     MissingTensor(String),
+    #[error("the network file has no segmenter embedded (train one: `fusepose train --stage seg`)")]
+    NoSegmenter,
     #[error("tensor `{name}` has shape {got:?}, expected {expected:?}")]
     WrongShape {
         name: String,

@@ -2,6 +2,12 @@
 //! [`SegConfig`], object list, training record), every tensor's dtype and shape,
 //! and matching against an object set. Errors are the network loader's typed
 //! [`NetLoadError`]; nothing panics on a bad file.
+//!
+//! Two layouts: a segmenter-only file (format `fusepose-seg-v1`, tensors
+//! `e1.weight` …, the usual object/train keys) and a pose-network file with
+//! the segmenter embedded (format `fusepose-net-v1`, tensors `seg.e1.weight` …,
+//! keys `fusepose.seg.*`), so one shipped file holds one object set's networks.
+//! [`embed`] writes the second from the first.
 
 use std::collections::HashMap;
 use std::path::Path;
@@ -19,6 +25,17 @@ pub const FORMAT: &str = "fusepose-seg-v1";
 pub const KEY_CONFIG: &str = "fusepose.seg.config";
 /// Metadata key of the trainer's hyper-parameters (free-form JSON, informative only).
 pub const KEY_HYPER: &str = "fusepose.seg.hyper";
+/// Embedded in a pose-network file: the segmenter's object list and training record
+/// (the file's own `fusepose.objects` / `fusepose.train` describe the pose network).
+pub const KEY_EMBEDDED_OBJECTS: &str = "fusepose.seg.objects";
+pub const KEY_EMBEDDED_TRAIN: &str = "fusepose.seg.train";
+/// Tensor name prefix of an embedded segmenter.
+pub const EMBEDDED_PREFIX: &str = "seg.";
+
+/// Whether a pose-network file's metadata says it has a segmenter embedded.
+pub fn has_embedded(metadata: &HashMap<String, String>) -> bool {
+    metadata.get(meta::KEY_FORMAT).is_some_and(|f| f == meta::FORMAT) && metadata.contains_key(KEY_CONFIG)
+}
 
 /// A parsed, checked segmenter file.
 #[derive(Clone, Debug)]
@@ -50,23 +67,29 @@ impl SegFile {
         let st = SafeTensors::deserialize(bytes).map_err(|e| NetLoadError::Format(e.to_string()))?;
         let get = |key: &'static str| metadata.get(key).ok_or(NetLoadError::MissingMetadata(key));
         let format = get(meta::KEY_FORMAT)?;
-        if format != FORMAT {
+        // (objects key, train key, tensor prefix) of the two layouts.
+        let (key_objects, key_train, prefix) = if format == FORMAT {
+            (meta::KEY_OBJECTS, meta::KEY_TRAIN, "")
+        } else if format == meta::FORMAT {
+            if !metadata.contains_key(KEY_CONFIG) {
+                return Err(NetLoadError::NoSegmenter);
+            }
+            (KEY_EMBEDDED_OBJECTS, KEY_EMBEDDED_TRAIN, EMBEDDED_PREFIX)
+        } else {
             return Err(NetLoadError::UnsupportedFormat { found: format.clone(), expected: FORMAT });
-        }
+        };
         let config: SegConfig = serde_json::from_str(get(KEY_CONFIG)?).map_err(|e| bad(KEY_CONFIG, e))?;
         config.validate().map_err(|m| bad(KEY_CONFIG, m))?;
         let objects: Vec<ObjectEntry> =
-            serde_json::from_str(get(meta::KEY_OBJECTS)?).map_err(|e| bad(meta::KEY_OBJECTS, e))?;
+            serde_json::from_str(get(key_objects)?).map_err(|e| bad(key_objects, e))?;
         if objects.len() != config.num_classes {
-            return Err(bad(
-                meta::KEY_OBJECTS,
-                format!("{} objects for {} classes", objects.len(), config.num_classes),
-            ));
+            return Err(bad(key_objects, format!("{} objects for {} classes", objects.len(), config.num_classes)));
         }
-        let train = metadata.get(meta::KEY_TRAIN).and_then(|s| serde_json::from_str(s).ok());
+        let train = metadata.get(key_train).and_then(|s| serde_json::from_str(s).ok());
         let mut tensors = HashMap::new();
         for (name, shape) in config.tensor_shapes() {
-            let view = st.tensor(&name).map_err(|_| NetLoadError::MissingTensor(name.clone()))?;
+            let view =
+                st.tensor(&format!("{prefix}{name}")).map_err(|_| NetLoadError::MissingTensor(format!("{prefix}{name}")))?;
             if view.dtype() != Dtype::F32 {
                 return Err(NetLoadError::WrongDtype { name, dtype: format!("{:?}", view.dtype()) });
             }
@@ -112,3 +135,53 @@ impl SegFile {
         self.tensors.get(name).map(Vec::as_slice).ok_or_else(|| NetLoadError::MissingTensor(name.to_string()))
     }
 }
+
+/// Returns the bytes of the pose-network file `pose` with `seg` embedded
+/// (replacing an embedded segmenter it already has). Both must be for the same
+/// objects in the same order; otherwise [`NetLoadError::ObjectMismatch`] /
+/// [`NetLoadError::ObjectCount`] says where they differ.
+pub fn embed(pose: &[u8], seg: &SegFile) -> Result<Vec<u8>, NetLoadError> {
+    let net = crate::net::WeightFile::from_bytes(pose)?;
+    if net.objects.len() != seg.objects.len() {
+        return Err(NetLoadError::ObjectCount { file: seg.objects.len(), set: net.objects.len() });
+    }
+    for (i, (s, n)) in seg.objects.iter().zip(&net.objects).enumerate() {
+        if s != n {
+            let what = if s.name != n.name { "name" } else if s.hash != n.hash { "mesh or sample points (hash)" } else { "symmetry or diameter" };
+            return Err(NetLoadError::ObjectMismatch { class: i + 1, file_name: s.name.clone(), set_name: n.name.clone(), what });
+        }
+    }
+    let st = SafeTensors::deserialize(pose).map_err(|e| NetLoadError::Format(e.to_string()))?;
+    let mut tensors: Vec<(String, safetensors::tensor::TensorView<'_>)> = st
+        .tensors()
+        .into_iter()
+        .filter(|(name, _)| !name.starts_with(EMBEDDED_PREFIX))
+        .collect();
+    let seg_bytes: Vec<(String, Vec<usize>, Vec<u8>)> = seg
+        .config
+        .tensor_shapes()
+        .into_iter()
+        .map(|(name, shape)| {
+            let data = seg.tensor(&name)?.iter().flat_map(|v| v.to_le_bytes()).collect();
+            Ok((format!("{EMBEDDED_PREFIX}{name}"), shape, data))
+        })
+        .collect::<Result<_, NetLoadError>>()?;
+    for (name, shape, data) in &seg_bytes {
+        let view = safetensors::tensor::TensorView::new(Dtype::F32, shape.clone(), data)
+            .map_err(|e| NetLoadError::Format(e.to_string()))?;
+        tensors.push((name.clone(), view));
+    }
+    let mut metadata: HashMap<String, String> =
+        net.metadata.into_iter().filter(|(k, _)| !k.starts_with("fusepose.seg.")).collect();
+    let json = |r: serde_json::Result<String>| r.map_err(|e| NetLoadError::Format(e.to_string()));
+    metadata.insert(KEY_CONFIG.into(), json(serde_json::to_string(&seg.config))?);
+    metadata.insert(KEY_EMBEDDED_OBJECTS.into(), json(serde_json::to_string(&seg.objects))?);
+    if let Some(t) = &seg.train {
+        metadata.insert(KEY_EMBEDDED_TRAIN.into(), json(serde_json::to_string(t))?);
+    }
+    if let Some(h) = seg.metadata.get(KEY_HYPER) {
+        metadata.insert(KEY_HYPER.into(), h.clone());
+    }
+    safetensors::serialize(tensors, Some(metadata)).map_err(|e| NetLoadError::Format(e.to_string()))
+}
+

@@ -118,8 +118,11 @@ impl Confusion {
     }
 }
 
-/// Renders `frames` held-out scenes and scores `engine` on them.
+/// Renders `frames` held-out scenes and scores `engine` on them: the network's
+/// labels after fragment removal, before the erosion meant for pose input
+/// (`SegEngine::set_erode`, switched off here).
 pub fn validate(engine: &mut SegEngine, set: &ObjectSet, frames: usize) -> anyhow::Result<SegValidation> {
+    engine.set_erode(false);
     let k = Intrinsics::YCB_VIDEO;
     let mut target = RenderTarget::for_intrinsics(&k);
     let mut pred = vec![0u16; k.width as usize * k.height as usize];

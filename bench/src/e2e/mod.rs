@@ -1,0 +1,433 @@
+//! `fusepose-bench e2e`: the daemon, a producer replaying a rendered video
+//! (K objects, label planes) and a consumer, each its own process, at one or
+//! more frame rates. Reports capture → consumer latency (p50/p99/p99.9/max),
+//! achieved FPS, skipped frames (sent but never posed), deadline-missed and
+//! degraded messages, and the refiner iterations the deadline left.
+//!
+//! Capture time is taken when the producer loans the frame, so the copy into
+//! shared memory, the transport, the daemon, the pose message and the
+//! consumer's wake-up all count. The first second of frames is warm-up.
+
+pub mod processes;
+
+use std::path::PathBuf;
+use std::time::Duration;
+
+use fusepose_client::{Ipc, StatsClient};
+use hdrhistogram::Histogram;
+
+use crate::child::{ChildProcess, IpcNamespace};
+use crate::latency::{self, Percentiles};
+use crate::loadavg;
+use processes::{CAMERA, ConsumerCounts};
+
+/// Options of `fusepose-bench e2e`.
+#[derive(Clone, Debug, clap::Args)]
+pub struct E2eArgs {
+    /// Frame rates to run, comma separated.
+    #[arg(long, value_delimiter = ',', default_value = "24,30,60")]
+    pub fps: Vec<f64>,
+    /// Objects per frame.
+    #[arg(long, default_value_t = 5)]
+    pub objects: usize,
+    /// Measured seconds per frame rate (after 1 s of warm-up).
+    #[arg(long, default_value_t = 20.0)]
+    pub seconds: f64,
+    /// Capture → publish deadline, ms (default: one frame period, 1000/fps).
+    #[arg(long)]
+    pub deadline_ms: Option<f64>,
+    /// Network weights.
+    #[arg(long, default_value = "models/builtin.safetensors")]
+    pub weights: PathBuf,
+    /// Network threads per frame (1 or 2).
+    #[arg(long, default_value_t = 2)]
+    pub threads: usize,
+    /// Refiner iterations at most per object.
+    #[arg(long, default_value_t = 2)]
+    pub refine_iterations: usize,
+    /// Turn deadline-aware degradation off (every frame in full).
+    #[arg(long)]
+    pub no_degrade: bool,
+    /// Tracking mode on (`[estimator.tracking] enabled = true`).
+    #[arg(long)]
+    pub tracking: bool,
+    /// Pin the daemon's loop and network worker to CPUs 0 and 1.
+    #[arg(long)]
+    pub pin: bool,
+    /// The daemon's frame receive spin (`ipc.receive_spin_us`), µs.
+    #[arg(long, default_value_t = 200)]
+    pub receive_spin_us: u64,
+    /// Distinct rendered frames of the video (played back and forth).
+    #[arg(long, default_value_t = 48)]
+    pub video_frames: usize,
+    /// Scene seed.
+    #[arg(long, default_value_t = 7)]
+    pub seed: u64,
+    /// Extra lines for the daemon config's `[estimator]` table (e.g. `masks = "net"`).
+    #[arg(long, default_value = "")]
+    pub estimator_extra: String,
+    /// A short run (seconds; for CI).
+    #[arg(long)]
+    pub smoke: bool,
+    /// Folder for the table, PNG, `.hlog` and daemon logs.
+    #[arg(long, default_value = "scratch/bench/e2e")]
+    pub out: PathBuf,
+}
+
+impl Default for E2eArgs {
+    fn default() -> Self {
+        Self {
+            fps: vec![24.0, 30.0, 60.0],
+            objects: 5,
+            seconds: 20.0,
+            deadline_ms: None,
+            weights: "models/builtin.safetensors".into(),
+            threads: 2,
+            refine_iterations: 2,
+            no_degrade: false,
+            tracking: false,
+            pin: false,
+            receive_spin_us: 200,
+            video_frames: 48,
+            seed: 7,
+            estimator_extra: String::new(),
+            smoke: false,
+            out: "scratch/bench/e2e".into(),
+        }
+    }
+}
+
+/// One frame rate's result.
+#[derive(Clone, Debug)]
+pub struct RateResult {
+    pub fps: f64,
+    pub deadline_ms: f64,
+    pub sent: u64,
+    pub counts: ConsumerCounts,
+    pub latency: Percentiles,
+    pub histogram: Histogram<u64>,
+    /// Consumer-side: messages later than the deadline at the consumer.
+    pub late_at_consumer: u64,
+    /// The daemon's own count of frames it dropped as stale (a newer one was waiting).
+    pub daemon_stale: Option<u64>,
+    pub estimator: String,
+}
+
+impl RateResult {
+    pub fn achieved_fps(&self) -> f64 {
+        if self.counts.span_s > 0.0 {
+            (self.counts.messages.saturating_sub(1)) as f64 / self.counts.span_s
+        } else {
+            0.0
+        }
+    }
+    /// Frames sent (after warm-up) that got no pose message.
+    pub fn skipped(&self) -> u64 {
+        self.sent.saturating_sub(self.counts.messages)
+    }
+}
+
+/// Everything one run measured.
+#[derive(Clone, Debug)]
+pub struct E2eReport {
+    pub args: E2eArgs,
+    pub rates: Vec<RateResult>,
+    pub load_before: String,
+    pub load_after: String,
+    pub png: Option<PathBuf>,
+    pub hlog: Option<PathBuf>,
+}
+
+fn daemon_config(
+    args: &E2eArgs,
+    ns: &IpcNamespace,
+    deadline_ms: f64,
+    hlog: &std::path::Path,
+) -> String {
+    let pins = if args.pin { "[0, 1]" } else { "[]" };
+    format!(
+        "cameras = [\"{CAMERA}\"]\nlog_level = \"info\"\ndeadline_ms = {deadline_ms}\n\n[estimator]\nkind = \"net\"\nweights = {:?}\nmax_instances = 8\nrefine_iterations = {}\nworker_threads = {}\ndeadline_aware = {}\npin_cpus = {pins}\n{}\n\n[estimator.tracking]\nenabled = {}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 0.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\nreceive_spin_us = {}\n",
+        args.weights.display().to_string(),
+        args.refine_iterations,
+        args.threads.clamp(1, 2),
+        !args.no_degrade,
+        args.estimator_extra,
+        args.tracking,
+        hlog.display().to_string(),
+        ns.root.display().to_string(),
+        ns.prefix,
+        args.receive_spin_us,
+    )
+}
+
+fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
+    let seconds = if args.smoke {
+        args.seconds.min(2.0)
+    } else {
+        args.seconds
+    };
+    let warmup = fps.ceil() as u64;
+    let frames = warmup + (fps * seconds).round() as u64;
+    let deadline_ms = args.deadline_ms.unwrap_or(1000.0 / fps);
+    let ns = IpcNamespace::new(&format!("e2e{}", fps as u64))?;
+    let tag = format!("{}fps", fps as u64);
+    let config_path = ns.dir.join("fuseposed.toml");
+    std::fs::write(
+        &config_path,
+        daemon_config(
+            args,
+            &ns,
+            deadline_ms,
+            &args.out.join(format!("e2e-{tag}.daemon.hlog")),
+        ),
+    )?;
+    let log = args.out.join(format!("e2e-{tag}.daemon.log"));
+    let env = ns.env();
+
+    let daemon = ChildProcess::spawn(
+        "daemon",
+        &[
+            "e2e-daemon".into(),
+            config_path.display().to_string(),
+            log.display().to_string(),
+        ],
+        &env,
+        Duration::from_secs(120),
+    )?;
+    // Ready when it answers a stats query.
+    let ipc = Ipc::new(&ns.options())?;
+    let stats = StatsClient::open(&ipc, CAMERA)?;
+    let t0 = std::time::Instant::now();
+    while stats.query(Duration::from_millis(300)).is_err() {
+        anyhow::ensure!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the daemon did not answer within 60 s (log: {})",
+            log.display()
+        );
+    }
+    let file = ns.dir.join("latencies.txt");
+    let mut consumer = ChildProcess::spawn(
+        "consumer",
+        &[
+            "e2e-consumer".into(),
+            frames.to_string(),
+            warmup.to_string(),
+            file.display().to_string(),
+        ],
+        &env,
+        Duration::from_secs(30),
+    )?;
+    let video_frames = if args.smoke { 4 } else { args.video_frames };
+    let mut producer = ChildProcess::spawn(
+        "producer",
+        &[
+            "e2e-producer".into(),
+            fps.to_string(),
+            frames.to_string(),
+            args.objects.to_string(),
+            args.seed.to_string(),
+            video_frames.to_string(),
+        ],
+        &env,
+        Duration::from_secs(600),
+    )?;
+    eprintln!(
+        "e2e {fps} fps: {frames} frames ({warmup} warm-up), deadline {deadline_ms:.1} ms ..."
+    );
+    let run_time = Duration::from_secs_f64(frames as f64 / fps + 60.0);
+    producer.expect_line("done", run_time)?;
+    let result = consumer.expect_line("result", Duration::from_secs(30))?;
+    let counts: ConsumerCounts = serde_json::from_str(&result)?;
+    let daemon_stale = stats
+        .query(Duration::from_secs(1))
+        .ok()
+        .map(|s| s.frames_skipped_stale);
+    daemon.interrupt();
+    let _ = daemon.finish(Duration::from_secs(10));
+    let _ = producer.finish(Duration::from_secs(5));
+    let _ = consumer.finish(Duration::from_secs(5));
+    let estimator = std::fs::read_to_string(&log)
+        .ok()
+        .and_then(|l| {
+            l.lines()
+                .find(|x| x.contains("fuseposed ready"))
+                .map(|x| x.to_owned())
+        })
+        .and_then(|l| {
+            l.split("estimator=")
+                .nth(1)
+                .map(|s| s.split(" deadline_ms").next().unwrap_or(s).to_owned())
+        })
+        .unwrap_or_default();
+
+    let mut histogram = latency::histogram();
+    let deadline_ns = (deadline_ms * 1e6) as u64;
+    let mut late = 0;
+    for v in std::fs::read_to_string(&file)?
+        .lines()
+        .filter_map(|l| l.parse::<u64>().ok())
+    {
+        histogram.saturating_record(v.max(1));
+        late += (v > deadline_ns) as u64;
+    }
+    Ok(RateResult {
+        fps,
+        deadline_ms,
+        sent: frames - warmup,
+        latency: Percentiles::of(&histogram),
+        histogram,
+        counts,
+        late_at_consumer: late,
+        daemon_stale,
+        estimator,
+    })
+}
+
+/// Runs every frame rate in turn; progress on stderr.
+pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
+    anyhow::ensure!(
+        args.weights.exists(),
+        "{} does not exist (the network weights)",
+        args.weights.display()
+    );
+    anyhow::ensure!(
+        args.fps.iter().all(|f| f.is_finite() && *f > 0.0),
+        "--fps must be positive"
+    );
+    std::fs::create_dir_all(&args.out)?;
+    let load_before = loadavg::loadavg();
+    let mut rates = Vec::new();
+    for &fps in &args.fps {
+        rates.push(run_rate(args, fps)?);
+    }
+    let series: Vec<(String, Percentiles)> = rates
+        .iter()
+        .map(|r| {
+            (
+                format!("{} FPS, {} objects", r.fps, args.objects),
+                r.latency,
+            )
+        })
+        .collect();
+    let png = args.out.join("e2e.png");
+    let png = latency::plot_percentiles(
+        &png,
+        "capture -> consumer latency (daemon + network, 5 objects)",
+        "ms",
+        1e6,
+        &series,
+    )
+    .ok()
+    .map(|_| png);
+    let hlog = args.out.join("e2e.hlog");
+    let tagged: Vec<(String, &Histogram<u64>)> = rates
+        .iter()
+        .map(|r| (format!("e2e.{}fps", r.fps), &r.histogram))
+        .collect();
+    let duration_ns = (args.seconds * 1e9) as u64;
+    let hlog = latency::write_hlog(
+        &hlog,
+        "fusepose-bench e2e: capture -> consumer latency, ns",
+        &tagged,
+        duration_ns,
+    )
+    .ok()
+    .map(|_| hlog);
+    Ok(E2eReport {
+        args: args.clone(),
+        rates,
+        load_before,
+        load_after: loadavg::loadavg(),
+        png,
+        hlog,
+    })
+}
+
+/// The printed table.
+pub fn render(r: &E2eReport) -> String {
+    let a = &r.args;
+    let mut s = format!(
+        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + producer ({} objects, rendered video) + consumer\n",
+        a.threads, a.refine_iterations, !a.no_degrade, a.tracking, a.pin, a.objects
+    );
+    if let Some(e) = r
+        .rates
+        .first()
+        .map(|r| &r.estimator)
+        .filter(|e| !e.is_empty())
+    {
+        s.push_str(&format!("estimator: {e}\n"));
+    }
+    s.push_str(&format!(
+        "loadavg before: {}   cpus: {}\n\n",
+        r.load_before,
+        loadavg::cpus()
+    ));
+    s.push_str(&format!(
+        "{:>6} {:>9} {:>8} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}\n",
+        "fps",
+        "achieved",
+        "deadline",
+        "sent",
+        "posed",
+        "skipped",
+        "missed",
+        "late@cons",
+        "degraded",
+        "p50 ms",
+        "p99 ms",
+        "p99.9 ms",
+        "max ms",
+        "iters"
+    ));
+    for x in &r.rates {
+        let [p50, p99, p999, max] = x.latency.scaled(1e6);
+        let iters = if x.counts.objects > 0 {
+            x.counts.refine_iterations as f64 / x.counts.objects as f64
+        } else {
+            f64::NAN
+        };
+        s.push_str(&format!(
+            "{:>6.1} {:>9.2} {:>8.1} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>7.2}\n",
+            x.fps,
+            x.achieved_fps(),
+            x.deadline_ms,
+            x.sent,
+            x.counts.messages,
+            x.skipped(),
+            x.counts.deadline_missed,
+            x.late_at_consumer,
+            x.counts.degraded,
+            p50,
+            p99,
+            p999,
+            max,
+            iters
+        ));
+    }
+    s.push_str("\nachieved = posed messages per second at the consumer; skipped = sent but never posed (the daemon keeps only the newest frame);\n");
+    s.push_str("missed = DEADLINE_MISSED flags (capture -> publish > deadline); late@cons = capture -> consumer > deadline; iters = mean refiner iterations per object.\n");
+    for x in &r.rates {
+        let objects = if x.counts.messages > 0 {
+            x.counts.objects as f64 / x.counts.messages as f64
+        } else {
+            0.0
+        };
+        s.push_str(&format!(
+            "{} fps: {:.2} objects per message, invalid {}, estimator failed {}, daemon stale drops {}\n",
+            x.fps,
+            objects,
+            x.counts.invalid,
+            x.counts.estimator_failed,
+            x.daemon_stale.map_or("n/a".into(), |v| v.to_string())
+        ));
+    }
+    if let Some(p) = &r.png {
+        s.push_str(&format!("png: {}\n", p.display()));
+    }
+    if let Some(p) = &r.hlog {
+        s.push_str(&format!("hlog: {}\n", p.display()));
+    }
+    s.push_str(&format!("loadavg after: {}\n", r.load_after));
+    s
+}

@@ -1,0 +1,174 @@
+//! The three processes of `fusepose-bench e2e` besides the parent, as hidden
+//! subcommands of the benchmark binary:
+//!
+//! - `e2e-daemon CONFIG LOG`: the daemon — exactly what `fuseposed --config
+//!   CONFIG` runs (`engine::resolve` + `fusepose_daemon::run`), logging to LOG;
+//! - `e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES`: renders a video
+//!   sequence, prints `ready`, then publishes FRAMES frames at FPS (ping-pong
+//!   over the video), capture time taken when each frame is loaned;
+//! - `e2e-consumer FRAMES WARMUP FILE`: receives every pose message through
+//!   the client library (default wait strategy), writes capture → consumer
+//!   latencies (ns, one per line) to FILE and prints `result <json>`.
+
+use std::io::Write;
+use std::time::{Duration, Instant};
+
+use fusepose_client::{
+    Consumer, DepthMut, FrameLayout, Ipc, IpcOptions, LabelFormat, LabelsMut, PoseStatus, Producer,
+    monotonic_ns,
+};
+
+use crate::video::{self, DEPTH_SCALE_M};
+
+/// The camera name every e2e process uses.
+pub const CAMERA: &str = "cam0";
+
+pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
+    anyhow::ensure!(args.len() == 2, "usage: e2e-daemon CONFIG LOG");
+    let config = fusepose_daemon::DaemonConfig::load(std::path::Path::new(&args[0]))?;
+    let log = std::fs::File::create(&args[1])?;
+    let filter = tracing_subscriber::EnvFilter::try_new(&config.log_level)?;
+    tracing_subscriber::fmt()
+        .with_env_filter(filter)
+        .with_ansi(false)
+        .with_writer(std::sync::Mutex::new(log))
+        .init();
+    iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Warn);
+    let spec = fusepose_daemon::engine::resolve(&config.estimator)?;
+    println!("ready {}", spec.description);
+    std::io::stdout().flush()?;
+    fusepose_daemon::run(&config, &spec, None)?;
+    Ok(())
+}
+
+pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
+    anyhow::ensure!(
+        args.len() == 5,
+        "usage: e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES"
+    );
+    let fps: f64 = args[0].parse()?;
+    let frames: u64 = args[1].parse()?;
+    let objects: usize = args[2].parse()?;
+    let seed: u64 = args[3].parse()?;
+    let video_frames: usize = args[4].parse()?;
+    let set = fusepose_scene::builtin::builtin_objects();
+    let video = video::render_video(&set, objects, video_frames, 0.5, seed)?;
+    let k = video.intrinsics;
+    let layout = FrameLayout {
+        width: k.width,
+        height: k.height,
+        depth_scale: DEPTH_SCALE_M,
+        labels: Some(LabelFormat::U16),
+        ..FrameLayout::vga_rgbd()
+    };
+    let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("e2e-producer"))?;
+    let mut producer = Producer::create(&ipc, CAMERA, layout)?;
+    println!("ready");
+    std::io::stdout().flush()?;
+    let period = Duration::from_secs_f64(1.0 / fps);
+    let t0 = Instant::now();
+    for i in 0..frames {
+        let source = &video.frames[video::ping_pong(i as usize, video.frames.len())];
+        // Capture time = when the frame is loaned: copying it in counts as latency.
+        let mut frame = producer.loan()?;
+        frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+        let planes = frame.planes_mut();
+        planes.color.copy_from_slice(&source.rgb);
+        if let DepthMut::U16(d) = planes.depth {
+            d.copy_from_slice(&source.depth);
+        }
+        if let Some(LabelsMut::U16(l)) = planes.labels {
+            l.copy_from_slice(&source.labels);
+        }
+        frame.send()?;
+        if let Some(wait) =
+            (t0 + period.mul_f64(i as f64 + 1.0)).checked_duration_since(Instant::now())
+        {
+            std::thread::sleep(wait);
+        }
+    }
+    let seconds = t0.elapsed().as_secs_f64();
+    println!("done {frames} {seconds:.3}");
+    // Linger so the last frame is not torn down before the daemon took it.
+    std::thread::sleep(Duration::from_millis(500));
+    Ok(())
+}
+
+/// What the consumer counted (frames with sequence ≥ WARMUP only).
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+pub struct ConsumerCounts {
+    pub messages: u64,
+    pub ok: u64,
+    pub deadline_missed: u64,
+    pub degraded: u64,
+    pub invalid: u64,
+    pub estimator_failed: u64,
+    pub objects: u64,
+    pub refine_iterations: u64,
+    /// Seconds between the first and the last counted message.
+    pub span_s: f64,
+}
+
+pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
+    anyhow::ensure!(args.len() == 3, "usage: e2e-consumer FRAMES WARMUP FILE");
+    let frames: u64 = args[0].parse()?;
+    let warmup: u64 = args[1].parse()?;
+    let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("e2e-consumer"))?;
+    let mut consumer = Consumer::open(&ipc, CAMERA)?;
+    println!("ready");
+    std::io::stdout().flush()?;
+    let mut latencies = Vec::with_capacity(frames as usize);
+    let mut counts = ConsumerCounts::default();
+    let mut batch = Vec::with_capacity(8);
+    let (mut first, mut last) = (None, 0u64);
+    let started = Instant::now();
+    let mut idle_since = Instant::now();
+    loop {
+        let idle = idle_since.elapsed();
+        if (first.is_some() && idle > Duration::from_secs(3))
+            || started.elapsed() > Duration::from_secs(3600)
+        {
+            break;
+        }
+        if first.is_none() && idle > Duration::from_secs(120) {
+            anyhow::bail!("no pose message within 120 s");
+        }
+        if !consumer.wait_ready(Duration::from_millis(200))? {
+            continue;
+        }
+        batch.clear();
+        consumer.drain(&mut batch)?;
+        let now = monotonic_ns();
+        idle_since = Instant::now();
+        let mut done = false;
+        for msg in &batch {
+            done |= msg.frame_sequence + 1 >= frames;
+            if msg.frame_sequence < warmup {
+                continue;
+            }
+            first.get_or_insert(now);
+            last = now;
+            latencies.push(now.saturating_sub(msg.capture_time_ns));
+            counts.messages += 1;
+            counts.ok += msg.is_ok() as u64;
+            counts.deadline_missed += (msg.status & PoseStatus::DEADLINE_MISSED != 0) as u64;
+            counts.degraded += (msg.status & PoseStatus::DEGRADED != 0) as u64;
+            counts.invalid += (msg.status & PoseStatus::INVALID_FRAME != 0) as u64;
+            counts.estimator_failed += (msg.status & PoseStatus::ESTIMATOR_FAILED != 0) as u64;
+            counts.objects += msg.objects().len() as u64;
+            counts.refine_iterations += msg
+                .objects()
+                .iter()
+                .map(|o| o.refine_iterations as u64)
+                .sum::<u64>();
+        }
+        if done {
+            break;
+        }
+    }
+    counts.span_s = first.map_or(0.0, |f| (last - f) as f64 / 1e9);
+    let text: String = latencies.iter().map(|v| format!("{v}\n")).collect();
+    std::fs::write(&args[2], text)?;
+    println!("result {}", serde_json::to_string(&counts)?);
+    Ok(())
+}

@@ -1,0 +1,108 @@
+//! `--masks net`: the built-in segmenter run once per evaluated frame (shared
+//! by every estimator under evaluation), timed, and scored against the
+//! dataset's ground-truth class labels (mIoU, per-class IoU).
+
+use std::path::Path;
+use std::time::Instant;
+
+use anyhow::Context;
+use fusepose_estimator::seg::SegEngine;
+use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
+use fusepose_scene::ObjectSet;
+use fusepose_train::seg::validate::Confusion;
+
+use super::dataset::EvalFrame;
+
+/// The segmenter with its label buffer and accumulated scores.
+pub struct NetMasks {
+    engine: SegEngine,
+    /// Class ids of the last segmented frame.
+    pub labels: Vec<u16>,
+    /// Milliseconds per frame.
+    pub ms: Vec<f64>,
+    confusion: Confusion,
+    names: Vec<String>,
+}
+
+impl NetMasks {
+    /// Loads the segmenter of `weights` (a network file with one embedded, or a segmenter file).
+    /// `min_cells`: see `SegEngine::set_min_component_cells` (`None`: the engine's default).
+    pub fn load(
+        weights: &Path,
+        objects: &ObjectSet,
+        min_cells: Option<usize>,
+    ) -> anyhow::Result<Self> {
+        let mut engine = SegEngine::load(weights, objects).with_context(|| {
+            format!(
+                "--masks net: loading the segmenter of {}",
+                weights.display()
+            )
+        })?;
+        if let Some(n) = min_cells {
+            engine.set_min_component_cells(n);
+        }
+        Ok(Self {
+            engine,
+            labels: Vec::new(),
+            ms: Vec::new(),
+            confusion: Confusion::new(objects.len() + 1),
+            names: objects.objects.iter().map(|o| o.name.clone()).collect(),
+        })
+    }
+
+    /// Segments `frame` into [`NetMasks::labels`] and scores it against the frame's labels.
+    pub fn segment(&mut self, frame: &EvalFrame) -> anyhow::Result<()> {
+        let view = FrameView {
+            intrinsics: frame.intrinsics,
+            color_format: ColorFormat::Rgb8,
+            color: &frame.rgb,
+            depth: DepthPlane::U16 {
+                data: &frame.depth,
+                scale: frame.depth_unit_m as f32,
+            },
+            labels: None,
+        };
+        self.labels.resize(frame.labels.len(), 0);
+        let start = Instant::now();
+        self.engine.segment(&view, &mut self.labels)?;
+        self.ms.push(start.elapsed().as_secs_f64() * 1e3);
+        self.confusion.add(&self.labels, &frame.labels);
+        Ok(())
+    }
+
+    /// Prints mIoU, per-class IoU and the time per frame.
+    pub fn print(&self, median_ms: f64, p99_ms: f64) {
+        println!(
+            "\nsegmenter on {} frames: mIoU {:.3}, background IoU {:.3}, pixel accuracy {:.3}; time per frame median {median_ms:.2} ms, p99 {p99_ms:.2} ms",
+            self.ms.len(),
+            self.confusion.miou(),
+            self.confusion.iou(0).unwrap_or(0.0),
+            self.confusion.pixel_accuracy()
+        );
+        for (i, name) in self.names.iter().enumerate() {
+            match self.confusion.iou(i + 1) {
+                Some(v) => println!("  {name:<24} IoU {v:.3}"),
+                None => println!("  {name:<24} IoU -"),
+            }
+        }
+    }
+
+    /// `{"miou", "background_iou", "pixel_accuracy", "iou": {name: v}}`.
+    pub fn summary(&self, median_ms: f64, p99_ms: f64) -> serde_json::Value {
+        let iou: serde_json::Map<String, serde_json::Value> = self
+            .names
+            .iter()
+            .enumerate()
+            .filter_map(|(i, n)| self.confusion.iou(i + 1).map(|v| (n.clone(), v.into())))
+            .collect();
+        serde_json::json!({
+            "miou": self.confusion.miou(),
+            "background_iou": self.confusion.iou(0).unwrap_or(0.0),
+            "pixel_accuracy": self.confusion.pixel_accuracy(),
+            "ms_per_frame_median": median_ms,
+            "ms_per_frame_p99": p99_ms,
+            "frames": self.ms.len(),
+            "iou": iou,
+        })
+    }
+}

@@ -1,0 +1,172 @@
+/*
+ * fusepose.h - the fusepose wire types for C and C++ (C99, no dependencies).
+ *
+ * Hand-written mirror of the #[repr(C)] types in fusepose-client
+ * (client/src/frame_header.rs, pose_message.rs, stats.rs). The Rust test
+ * client/tests/c_header.rs compiles a C program against this header and
+ * compares every struct size, every field offset and size, every field name
+ * and every constant with the Rust definitions, so the two cannot drift apart
+ * unnoticed. See docs/PROTOCOL.md for the full contract.
+ *
+ * Conventions: little-endian; lengths in metres; times in nanoseconds of
+ * CLOCK_MONOTONIC; camera optical frame (x right, y down, z forward);
+ * quaternions [x, y, z, w] mapping object -> camera coordinates.
+ *
+ * iceoryx2 services of camera <name> (all carry the attribute
+ * "fusepose.wire_version" = FUSEPOSE_WIRE_VERSION as a decimal string):
+ *   fusepose/camera/<name>/frames  pub-sub, payload [u8] slice, user header fp_frame_header
+ *                                  (type name "fusepose::FrameHeader"), plus an event service
+ *   fusepose/camera/<name>/poses   pub-sub, payload fp_pose_message ("fusepose::PoseMessage"),
+ *                                  plus an event service of the same name
+ *   fusepose/camera/<name>/stats   request-response fp_stats_request -> fp_stats_snapshot
+ */
+#ifndef FUSEPOSE_H
+#define FUSEPOSE_H
+
+#include <stdint.h>
+
+#ifdef __cplusplus
+extern "C" {
+#endif
+
+/* Version of every wire type; bumped on any layout change. */
+#define FUSEPOSE_WIRE_VERSION 2
+/* b"FPFR" read as a little-endian u32: first field of every frame header. */
+#define FUSEPOSE_FRAME_MAGIC 0x52465046u
+/* Most object poses in one pose message. */
+#define FUSEPOSE_MAX_OBJECTS 32
+/* Largest accepted image side, pixels. */
+#define FUSEPOSE_MAX_IMAGE_SIDE 4096
+/* Pipeline stages timed per frame, and stages + end-to-end in stats arrays. */
+#define FUSEPOSE_STAGE_COUNT 6
+#define FUSEPOSE_TIMELINE_COUNT 7
+/* Number of invalid-frame reason codes (size of fp_stats_snapshot.invalid_by_reason). */
+#define FUSEPOSE_INVALID_REASON_COUNT 23
+
+/* fp_frame_header.color_format */
+#define FUSEPOSE_COLOR_RGB8 1
+#define FUSEPOSE_COLOR_BGR8 2
+/* fp_frame_header.depth_format: u16 units times depth_scale metres, or f32 metres; 0 = no reading. */
+#define FUSEPOSE_DEPTH_U16 1
+#define FUSEPOSE_DEPTH_F32 2
+/* fp_frame_header.label_format: per-pixel class id, 0 = background. */
+#define FUSEPOSE_LABELS_U8 1
+#define FUSEPOSE_LABELS_U16 2
+
+/* fp_pose_message.status bits */
+#define FUSEPOSE_STATUS_OK (1u << 0)
+#define FUSEPOSE_STATUS_INVALID_FRAME (1u << 1)
+#define FUSEPOSE_STATUS_DEADLINE_MISSED (1u << 2)
+#define FUSEPOSE_STATUS_DEGRADED (1u << 3)
+#define FUSEPOSE_STATUS_ESTIMATOR_FAILED (1u << 4)
+
+/* Stage indices into stage_ns and the stats arrays (end-to-end is index 6 in stats). */
+#define FUSEPOSE_STAGE_INGEST 0
+#define FUSEPOSE_STAGE_SEGMENTATION 1
+#define FUSEPOSE_STAGE_SAMPLING 2
+#define FUSEPOSE_STAGE_NETWORK 3
+#define FUSEPOSE_STAGE_REFINE 4
+#define FUSEPOSE_STAGE_PUBLISH 5
+
+/* Where one plane lies in the frame payload, bytes from the payload start. */
+typedef struct fp_plane_ref {
+    uint64_t offset;
+    uint64_t len;
+} fp_plane_ref;
+
+/* User header of every frame sample (128 bytes, no padding). */
+typedef struct fp_frame_header {
+    uint32_t magic;           /* FUSEPOSE_FRAME_MAGIC */
+    uint16_t format_version;  /* FUSEPOSE_WIRE_VERSION */
+    uint16_t header_size;     /* sizeof(fp_frame_header) as the producer saw it */
+    uint32_t camera_id;       /* FNV-1a 32 of the camera name */
+    uint32_t width;           /* pixels */
+    uint32_t height;          /* pixels */
+    float depth_scale;        /* metres per u16 depth unit (e.g. 0.001); 1.0 for f32 depth */
+    uint8_t color_format;     /* FUSEPOSE_COLOR_* */
+    uint8_t depth_format;     /* FUSEPOSE_DEPTH_* */
+    uint8_t has_labels;       /* 1 when a label plane is present */
+    uint8_t label_format;     /* FUSEPOSE_LABELS_* (ignored without labels) */
+    uint32_t _reserved;
+    uint64_t sequence;        /* producer frame counter, +1 per frame */
+    uint64_t capture_time_ns; /* CLOCK_MONOTONIC ns */
+    double fx;                /* pinhole intrinsics, pixels; pixel centres at integers */
+    double fy;
+    double cx;
+    double cy;
+    fp_plane_ref color;
+    fp_plane_ref depth;
+    fp_plane_ref labels;
+} fp_frame_header;
+
+/* One object's pose in the camera optical frame (80 bytes, no padding). */
+typedef struct fp_object_pose {
+    uint16_t class_id;          /* 1-based class id in the daemon's object set */
+    uint16_t instance_id;       /* instance index within the frame */
+    uint16_t refine_iterations; /* ICP or refiner iterations */
+    uint16_t _reserved;
+    float confidence;           /* 0..1 */
+    uint32_t mask_pixels;       /* pixels of the instance mask */
+    uint16_t bbox[4];           /* u_min, v_min, u_max, v_max, inclusive, pixels */
+    double quaternion[4];       /* rotation object -> camera, unit, [x, y, z, w] */
+    double translation_m[3];    /* translation object -> camera, metres */
+} fp_object_pose;
+
+/* The poses of one frame (2656 bytes). */
+typedef struct fp_pose_message {
+    uint16_t format_version;    /* FUSEPOSE_WIRE_VERSION */
+    uint16_t object_count;      /* valid entries at the start of objects[] */
+    uint32_t status;            /* FUSEPOSE_STATUS_* bits */
+    uint32_t invalid_reason;    /* reason code when FUSEPOSE_STATUS_INVALID_FRAME, else 0 */
+    uint32_t camera_id;
+    uint64_t frame_sequence;    /* sequence of the frame these poses belong to */
+    uint64_t capture_time_ns;   /* from the frame header, CLOCK_MONOTONIC ns */
+    uint64_t received_time_ns;  /* when the daemon took the frame */
+    uint64_t published_time_ns; /* when the daemon published this message */
+    uint64_t stage_ns[FUSEPOSE_STAGE_COUNT]; /* per-stage durations, ns; 0 = not run */
+    fp_object_pose objects[FUSEPOSE_MAX_OBJECTS];
+} fp_pose_message;
+
+/* A stats query. */
+typedef struct fp_stats_request {
+    uint16_t format_version;
+    uint8_t _reserved[6];
+} fp_stats_request;
+
+/* Percentiles of one latency histogram, ns (all 0 when count is 0). */
+typedef struct fp_latency_summary {
+    uint64_t count;
+    uint64_t p50_ns;
+    uint64_t p90_ns;
+    uint64_t p99_ns;
+    uint64_t p999_ns;
+    uint64_t max_ns;
+} fp_latency_summary;
+
+/* The daemon's counters and latency percentiles for one camera. */
+typedef struct fp_stats_snapshot {
+    uint16_t format_version;
+    uint16_t _reserved;
+    uint32_t camera_id;
+    uint64_t uptime_ns;
+    uint64_t window_ns;
+    uint64_t deadline_ns;
+    uint64_t frames_received;
+    uint64_t frames_processed;
+    uint64_t frames_skipped_stale;
+    uint64_t frames_missed_sequence;
+    uint64_t frames_invalid;
+    uint64_t invalid_by_reason[FUSEPOSE_INVALID_REASON_COUNT];
+    uint64_t deadline_misses;
+    uint64_t estimator_failures;
+    uint64_t poses_non_finite;
+    uint64_t producer_restarts;
+    fp_latency_summary since_start[FUSEPOSE_TIMELINE_COUNT];
+    fp_latency_summary last_window[FUSEPOSE_TIMELINE_COUNT];
+} fp_stats_snapshot;
+
+#ifdef __cplusplus
+}
+#endif
+
+#endif /* FUSEPOSE_H */

@@ -1,0 +1,147 @@
+//! A camera that sends nothing but RGB-D: rendered tabletop scenes go to
+//! `fuseposed` WITHOUT a label plane; the daemon segments them with the
+//! segmenter embedded in the committed `models/builtin.safetensors`
+//! (`masks = "auto"`), estimates poses with the fusion network and publishes
+//! them. The published classes must be the visible objects' and their poses
+//! close to the renderer's ground truth; the segmentation stage must be timed.
+
+use std::path::PathBuf;
+use std::time::{Duration, Instant};
+
+use fusepose_client::{
+    ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, PoseMessage, Producer, Stage,
+};
+use fusepose_scene::metrics::ObjectMetric;
+use fusepose_scene::render::{NoiseConfig, RenderTarget};
+use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
+use fusepose_scene::{Intrinsics, Pose};
+use fusepose_tests::*;
+use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+
+/// Objects at least this visible are expected in the answer.
+const MIN_VISIBLE_FRACTION: f64 = 0.6;
+/// Share of those the daemon must find (right class) with ADD-S below 10 % of the diameter.
+const MIN_FOUND_SHARE: f64 = 0.7;
+
+fn weights() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors")
+}
+
+fn wire_pose(q: [f64; 4], t: [f64; 3]) -> Pose {
+    let rotation = UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2]));
+    Pose::from_parts(Translation3::new(t[0], t[1], t[2]), rotation)
+}
+
+fn wait_for(
+    consumer: &mut Consumer,
+    sequence: u64,
+    timeout: Duration,
+) -> anyhow::Result<PoseMessage> {
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        if let Some(msg) = consumer.wait(Duration::from_millis(200))?
+            && msg.frame_sequence == sequence
+        {
+            return Ok(msg);
+        }
+    }
+    anyhow::bail!("no pose message for frame {sequence} within {timeout:?}")
+}
+
+#[test]
+fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
+    let weights = weights();
+    let env = TestEnv::new("segmenter")?;
+    let config = env.write_daemon_config(&format!(
+        "kind = \"net\"\nweights = {:?}\nmasks = \"auto\"\nmax_instances = 8\nworker_threads = 2",
+        weights.canonicalize()?
+    ))?;
+    let _daemon = start_daemon(&env, &config)?;
+
+    let objects = fusepose_scene::builtin::builtin_objects();
+    let metrics: Vec<ObjectMetric> = objects
+        .objects
+        .iter()
+        .map(|m| ObjectMetric::for_model(m).unwrap())
+        .collect();
+    let k = Intrinsics::YCB_VIDEO;
+    let layout = FrameLayout {
+        width: k.width,
+        height: k.height,
+        color_format: ColorFormat::Rgb8,
+        depth_format: DepthFormat::U16,
+        depth_scale: 1e-4,
+        labels: None,
+    };
+    let ipc = Ipc::new(&env.ipc_options())?;
+    let mut producer = Producer::create(&ipc, "cam0", layout)?;
+    let mut consumer = Consumer::open(&ipc, "cam0")?;
+    let mut target = RenderTarget::for_intrinsics(&k);
+
+    let (mut expected, mut found, mut frames) = (0usize, 0usize, 0u64);
+    for seed in 0..3u64 {
+        let scene = sample_scene(&objects, &SamplerConfig::default(), 2000 + seed)
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let truth = render_view_labelled(
+            &scene,
+            &objects,
+            0,
+            &k,
+            &NoiseConfig::default(),
+            LabelKind::Class,
+            &mut target,
+        )
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let mut frame = producer.loan()?;
+        frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+        let planes = frame.planes_mut();
+        assert!(planes.labels.is_none(), "the layout must carry no labels");
+        planes.color.copy_from_slice(target.rgb());
+        if let DepthMut::U16(d) = planes.depth {
+            d.copy_from_slice(target.depth_u16());
+        }
+        let sequence = frame.send()?;
+        let msg = wait_for(&mut consumer, sequence, Duration::from_secs(120))?;
+        frames += 1;
+        assert!(msg.is_ok(), "frame {sequence}: status {:#x}", msg.status);
+        assert!(
+            !msg.objects().is_empty(),
+            "frame {sequence}: no objects found without labels"
+        );
+        for gt in truth
+            .objects
+            .iter()
+            .filter(|o| o.visible_fraction >= MIN_VISIBLE_FRACTION)
+        {
+            let metric = &metrics[gt.class_id as usize - 1];
+            let diameter = objects.objects[gt.class_id as usize - 1].diameter;
+            let best = msg
+                .objects()
+                .iter()
+                .filter(|o| o.class_id == gt.class_id)
+                .map(|o| metric.add_s(&wire_pose(o.quaternion, o.translation_m), &gt.pose))
+                .fold(f64::INFINITY, f64::min);
+            expected += 1;
+            if best < 0.1 * diameter {
+                found += 1;
+            }
+        }
+    }
+    eprintln!(
+        "{found} of {expected} visible objects found with ADD-S < 10% diameter over {frames} frames"
+    );
+    assert!(expected >= 5, "too few visible objects: {expected}");
+    assert!(
+        found as f64 >= MIN_FOUND_SHARE * expected as f64,
+        "only {found} of {expected} objects found"
+    );
+
+    let stats = query_stats(&env, Duration::from_secs(5))?;
+    let seg = &stats.since_start[Stage::Segmentation as usize];
+    assert_eq!(
+        seg.count, frames,
+        "segmentation time recorded once per frame: {stats:?}"
+    );
+    assert!(seg.max_ns > 0, "{seg:?}");
+    Ok(())
+}
