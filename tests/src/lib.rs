@@ -381,3 +381,27 @@ fn base64_decode(s: &str) -> anyhow::Result<Vec<u8>> {
     }
     Ok(out)
 }
+
+/// A wire pose (quaternion `[x, y, z, w]`, translation in metres) as an
+/// object → camera isometry.
+pub fn wire_pose(q: [f64; 4], t: [f64; 3]) -> nalgebra::Isometry3<f64> {
+    let rotation = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[3], q[0], q[1], q[2]));
+    nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(t[0], t[1], t[2]), rotation)
+}
+
+/// Waits for the pose message answering frame `sequence`, skipping others.
+pub fn wait_for_sequence(
+    consumer: &mut fusepose_client::Consumer,
+    sequence: u64,
+    timeout: Duration,
+) -> anyhow::Result<fusepose_client::PoseMessage> {
+    let deadline = Instant::now() + timeout;
+    while Instant::now() < deadline {
+        if let Some(msg) = consumer.wait(Duration::from_millis(200))?
+            && msg.frame_sequence == sequence
+        {
+            return Ok(msg);
+        }
+    }
+    bail!("no pose message for frame {sequence} within {timeout:?}")
+}

@@ -3,17 +3,16 @@
 //! `fuseposed` running the ICP estimator; the poses it publishes are scored
 //! against the renderer's ground truth with ADD-S.
 
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use fusepose_client::{
-    ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, LabelFormat, LabelsMut, PoseMessage, Producer,
+    ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, LabelFormat, LabelsMut, Producer,
 };
 use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{FrameTruth, LabelKind, SamplerConfig, render_view_labelled, sample_scene};
-use fusepose_scene::{Intrinsics, Pose};
+use fusepose_scene::Intrinsics;
 use fusepose_tests::*;
-use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 
 /// Objects at least this visible are scored.
 const MIN_VISIBLE_FRACTION: f64 = 0.5;
@@ -24,22 +23,7 @@ const MIN_CORRECT_SHARE: f64 = 0.8;
 /// Median ADD-S bound, metres (measured: 2.8 mm over 29 objects of 6 frames).
 const MAX_MEDIAN_ADD_S_M: f64 = 0.01;
 
-fn wire_pose(q: [f64; 4], t: [f64; 3]) -> Pose {
-    let rotation = UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2]));
-    Pose::from_parts(Translation3::new(t[0], t[1], t[2]), rotation)
-}
 
-fn wait_for(consumer: &mut Consumer, sequence: u64, timeout: Duration) -> anyhow::Result<PoseMessage> {
-    let deadline = Instant::now() + timeout;
-    while Instant::now() < deadline {
-        if let Some(msg) = consumer.wait(Duration::from_millis(200))?
-            && msg.frame_sequence == sequence
-        {
-            return Ok(msg);
-        }
-    }
-    anyhow::bail!("no pose message for frame {sequence} within {timeout:?}")
-}
 
 #[test]
 fn icp_poses_match_rendered_ground_truth() -> anyhow::Result<()> {
@@ -82,7 +66,7 @@ fn icp_poses_match_rendered_ground_truth() -> anyhow::Result<()> {
                 l.copy_from_slice(target.labels());
             }
             let sequence = frame.send()?;
-            let msg = wait_for(&mut consumer, sequence, Duration::from_secs(120))?;
+            let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
             assert!(msg.is_ok(), "frame {sequence}: status {:#x}", msg.status);
             for gt in truth.objects.iter().filter(|o| o.visible_fraction >= MIN_VISIBLE_FRACTION) {
                 let metric = &metrics[gt.class_id as usize - 1];

@@ -6,17 +6,16 @@
 //! close to the renderer's ground truth; the segmentation stage must be timed.
 
 use std::path::PathBuf;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 
 use fusepose_client::{
-    ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, PoseMessage, Producer, Stage,
+    ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, Producer, Stage,
 };
 use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
-use fusepose_scene::{Intrinsics, Pose};
+use fusepose_scene::Intrinsics;
 use fusepose_tests::*;
-use nalgebra::{Quaternion, Translation3, UnitQuaternion};
 
 /// Objects at least this visible are expected in the answer.
 const MIN_VISIBLE_FRACTION: f64 = 0.6;
@@ -27,26 +26,7 @@ fn weights() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors")
 }
 
-fn wire_pose(q: [f64; 4], t: [f64; 3]) -> Pose {
-    let rotation = UnitQuaternion::from_quaternion(Quaternion::new(q[3], q[0], q[1], q[2]));
-    Pose::from_parts(Translation3::new(t[0], t[1], t[2]), rotation)
-}
 
-fn wait_for(
-    consumer: &mut Consumer,
-    sequence: u64,
-    timeout: Duration,
-) -> anyhow::Result<PoseMessage> {
-    let deadline = Instant::now() + timeout;
-    while Instant::now() < deadline {
-        if let Some(msg) = consumer.wait(Duration::from_millis(200))?
-            && msg.frame_sequence == sequence
-        {
-            return Ok(msg);
-        }
-    }
-    anyhow::bail!("no pose message for frame {sequence} within {timeout:?}")
-}
 
 #[test]
 fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
@@ -101,7 +81,7 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
             d.copy_from_slice(target.depth_u16());
         }
         let sequence = frame.send()?;
-        let msg = wait_for(&mut consumer, sequence, Duration::from_secs(120))?;
+        let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
         frames += 1;
         assert!(msg.is_ok(), "frame {sequence}: status {:#x}", msg.status);
         assert!(
