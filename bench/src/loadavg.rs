@@ -9,5 +9,8 @@ pub fn loadavg() -> String {
 
 /// Logical CPUs available to this process.
 pub fn cpus() -> usize {
-    std::thread::available_parallelism().map_or(1, |n| n.get())
+    // Online CPUs of the machine, not this (possibly pinned) thread's share.
+    // SAFETY: sysconf has no preconditions.
+    let n = unsafe { libc::sysconf(libc::_SC_NPROCESSORS_ONLN) };
+    if n > 0 { n as usize } else { std::thread::available_parallelism().map_or(1, |n| n.get()) }
 }

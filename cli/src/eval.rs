@@ -111,6 +111,9 @@ pub struct Args {
     /// Most instances estimated per frame (largest masks first).
     #[arg(long, default_value_t = 16)]
     pub max_instances: usize,
+    /// `net`: refiner iterations per object (default: the weight file's, 2).
+    #[arg(long)]
+    pub refine_iterations: Option<usize>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -249,7 +252,8 @@ impl Runner {
                 let Some(weights) = &args.weights else {
                     bail!("--estimator net needs --weights FILE (a safetensors file from `fusepose train`)");
                 };
-                let net = NetEstimator::load(weights, objects, NetOptions::default())
+                let options = NetOptions { refine_iterations: args.refine_iterations, ..NetOptions::default() };
+                let net = NetEstimator::load(weights, objects, options)
                     .with_context(|| format!("loading {}", weights.display()))?;
                 let config = net.workspace_config(args.max_instances);
                 (Box::new(net), config)

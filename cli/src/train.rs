@@ -93,6 +93,10 @@ pub struct Args {
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
+    /// Share (0..1) of rendered training frames whose masks come from the
+    /// segmenter embedded in the --resume file instead of the ground truth.
+    #[arg(long, default_value_t = 0.0)]
+    pub seg_masks: f64,
     /// `--stage seg`: network input size `WxH` of a fresh run (default 160x120).
     #[arg(long)]
     pub seg_size: Option<String>,
@@ -151,6 +155,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         config: Some(config),
         data_desc: match &args.dataset {
             Some(d) => format!("{} objects, BOP frames from {}", args.objects, d.display()),
+            None if args.seg_masks > 0.0 => format!(
+                "{} objects, tabletop scenes rendered on the fly with sensor noise, {:.0} % of frames with segmenter masks",
+                args.objects,
+                args.seg_masks * 100.0
+            ),
             None => format!(
                 "{} objects, tabletop scenes rendered on the fly with sensor noise",
                 args.objects
@@ -158,6 +167,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         source,
         progress: !args.quiet,
+        seg_masks: args.seg_masks,
     };
     let summary = train(Arc::new(set), &opts)?;
     println!(

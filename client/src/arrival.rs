@@ -6,7 +6,10 @@
 //! then seen within a microsecond or two of `send`, for a CPU cost of about
 //! `2 × margin` per period.
 //!
-//! [`ArrivalPredictor`] learns the period from arrival times;
+//! [`ArrivalPredictor`] learns the period from arrival times (a running mean
+//! at first, then smoothed) and how far arrivals stray from its grid; the
+//! polling window widens with that jitter, up to four times the configured
+//! margin, so a loaded sender is still caught while polling.
 //! [`WaitStrategy`] says whether and how long to poll.
 
 use std::time::Duration;
@@ -48,32 +51,82 @@ pub struct ArrivalPredictor {
     last_arrival_ns: Option<u64>,
     /// Smoothed inter-arrival period, ns.
     period_ns: Option<f64>,
+    /// Intervals seen (saturating), for the running mean at the start.
+    intervals: u32,
+    /// Smoothed distance of arrivals from the predicted grid, ns.
+    jitter_ns: f64,
+    /// Smoothed lateness of timed wake-ups (timer slack + scheduling), ns.
+    wake_delay_ns: f64,
+    /// Messages observed, and how many of them were caught while polling.
+    arrivals: u64,
+    polled: u64,
 }
 
-/// Weight of a new interval in the smoothed period.
+/// Weight of a new interval in the smoothed period (and jitter) once
+/// `1 / PERIOD_GAIN` intervals were seen; before that a running mean.
 const PERIOD_GAIN: f64 = 0.1;
 
+/// Weight of a new wake-up lateness in its smoothed value.
+const WAKE_GAIN: f64 = 0.2;
+
+/// Wake-up lateness above this is a descheduled receiver, not timer behaviour.
+const MAX_WAKE_DELAY_NS: f64 = 2e6;
+
+/// The polling window grows with the jitter up to this many margins.
+const MAX_MARGIN_FACTOR: u64 = 4;
+
 impl ArrivalPredictor {
+    /// Records that a message was found at `now_ns` while polling.
+    pub fn observe_polled(&mut self, now_ns: u64) {
+        self.polled += 1;
+        self.observe(now_ns);
+    }
+
+    /// (messages observed, of them caught while polling).
+    pub fn hits(&self) -> (u64, u64) {
+        (self.arrivals, self.polled)
+    }
+
     /// Records that a message arrived at `now_ns`.
     pub fn observe(&mut self, now_ns: u64) {
+        self.arrivals += 1;
         if let Some(last) = self.last_arrival_ns {
             let interval = now_ns.saturating_sub(last) as f64;
+            self.intervals = self.intervals.saturating_add(1);
+            let gain = PERIOD_GAIN.max(1.0 / self.intervals as f64);
             self.period_ns = match self.period_ns {
                 None if interval > 0.0 => Some(interval),
                 Some(p) => {
                     // k skipped messages make one interval k + 1 periods long: use its share.
                     let k = (interval / p).round().max(1.0);
-                    let share = if (interval - k * p).abs() < 0.2 * p {
-                        interval / k
-                    } else {
-                        interval
-                    };
-                    Some(p + PERIOD_GAIN * (share - p))
+                    let off_grid = (interval - k * p).abs();
+                    let share = if off_grid < 0.2 * p { interval / k } else { interval };
+                    self.jitter_ns += gain * (off_grid.min(0.2 * p) - self.jitter_ns);
+                    Some(p + gain * (share - p))
                 }
                 None => None,
             };
         }
         self.last_arrival_ns = Some(now_ns);
+    }
+
+    /// Records that a timed wait planned to end at `planned_ns` returned at
+    /// `woke_ns` without a message: later waits end that much earlier. A timed
+    /// wake-up came 70–130 µs late on this project's machine, most of the
+    /// default 200 µs margin.
+    pub fn record_wake(&mut self, planned_ns: u64, woke_ns: u64) {
+        let late = (woke_ns.saturating_sub(planned_ns) as f64).min(MAX_WAKE_DELAY_NS);
+        self.wake_delay_ns += WAKE_GAIN * (late - self.wake_delay_ns);
+    }
+
+    /// Smoothed lateness of timed wake-ups, ns.
+    pub fn wake_delay_ns(&self) -> u64 {
+        self.wake_delay_ns as u64
+    }
+
+    /// Smoothed distance of arrivals from the predicted grid, ns.
+    pub fn jitter_ns(&self) -> u64 {
+        self.jitter_ns as u64
     }
 
     /// The learned period, ns.
@@ -104,11 +157,14 @@ impl ArrivalPredictor {
             WaitStrategy::Block => WaitPlan::Block,
             WaitStrategy::BusyPoll => WaitPlan::SpinUntil(u64::MAX),
             WaitStrategy::SpinNearArrival { margin } => {
-                let margin_ns = margin.as_nanos() as u64;
+                let base = margin.as_nanos() as u64;
+                let margin_ns = base.max((2 * self.jitter_ns()).min(MAX_MARGIN_FACTOR * base));
+                // Wake early by the usual lateness so polling starts on time.
+                let early_ns = margin_ns + self.wake_delay_ns();
                 match self.next_arrival_ns(now_ns, margin_ns) {
                     None => WaitPlan::Block,
-                    Some(next) if now_ns + margin_ns < next => {
-                        WaitPlan::BlockUntil(next - margin_ns)
+                    Some(next) if now_ns + early_ns < next => {
+                        WaitPlan::BlockUntil(next - early_ns)
                     }
                     Some(next) => WaitPlan::SpinUntil(next + margin_ns),
                 }
@@ -157,9 +213,68 @@ mod tests {
             WaitPlan::BlockUntil(130 * MS - 200_000)
         );
         assert_eq!(p.plan(WaitStrategy::Block, 121 * MS), WaitPlan::Block);
+        assert_eq!(p.jitter_ns(), 0, "a steady sender has no jitter");
         assert_eq!(
             p.plan(WaitStrategy::BusyPoll, 121 * MS),
             WaitPlan::SpinUntil(u64::MAX)
         );
+    }
+
+    #[test]
+    fn the_period_converges_fast_from_a_short_first_interval() {
+        let mut p = ArrivalPredictor::default();
+        p.observe(0);
+        p.observe(30 * MS); // the first interval happens to be short
+        for i in 2..12 {
+            p.observe(30 * MS + (i - 1) * 33 * MS);
+        }
+        let err = p.period_ns().unwrap().abs_diff(33 * MS);
+        assert!(err < MS / 2, "period off by {err} ns after 11 intervals");
+    }
+
+    #[test]
+    fn jittery_arrivals_widen_the_polling_window_up_to_four_margins() {
+        let mut p = ArrivalPredictor::default();
+        let mut t = 0;
+        for i in 0..60u64 {
+            // ±300 µs around a 10 ms grid.
+            let jitter = if i % 2 == 0 { 300_000 } else { 0 };
+            p.observe(t + jitter);
+            t += 10 * MS;
+        }
+        let j = p.jitter_ns();
+        assert!(j > 100_000 && j < 400_000, "jitter {j} ns");
+        let last = t - 10 * MS; // last arrival (odd i: on the grid)
+        let WaitPlan::BlockUntil(until) = p.plan(SPIN, last + MS) else { panic!("expected a block") };
+        let margin = (last + 10 * MS).abs_diff(until);
+        assert!(margin > 200_000 && margin <= 800_000, "margin {margin} ns");
+        // A wildly irregular sender is capped at four margins.
+        let mut q = ArrivalPredictor::default();
+        for i in 0..60u64 {
+            q.observe(i * 10 * MS + (i * 7919 % 13) * 250_000);
+        }
+        let n = 59 * 10 * MS + (59 * 7919 % 13) * 250_000;
+        if let WaitPlan::BlockUntil(until) = q.plan(SPIN, n + MS) {
+            let next = q.next_arrival_ns(n + MS, 0).unwrap();
+            assert!(next - until <= 800_000);
+        }
+    }
+
+    #[test]
+    fn late_timed_wake_ups_make_the_receiver_wake_earlier() {
+        let mut p = ArrivalPredictor::default();
+        p.observe(100 * MS);
+        p.observe(110 * MS);
+        for _ in 0..30 {
+            p.record_wake(0, 100_000); // 100 µs late every time
+        }
+        assert!(p.wake_delay_ns().abs_diff(100_000) < 1_000);
+        assert_eq!(p.plan(SPIN, 111 * MS), WaitPlan::BlockUntil(120 * MS - 200_000 - p.wake_delay_ns()));
+        // Within margin + delay of the arrival: poll.
+        assert_eq!(p.plan(SPIN, 120 * MS - 250_000), WaitPlan::SpinUntil(120 * MS + 200_000));
+        // A descheduled receiver (50 ms late) counts as at most 2 ms.
+        let mut q = ArrivalPredictor::default();
+        q.record_wake(0, 50 * MS);
+        assert!(q.wake_delay_ns() <= 2 * MS / 5 + 1);
     }
 }

@@ -15,6 +15,9 @@ use crate::arrival::{ArrivalPredictor, WaitPlan, WaitStrategy};
 use crate::services::CameraServices;
 use crate::{ClientError, Ipc, PoseMessage, StatsRequest, StatsSnapshot, WIRE_VERSION, monotonic_ns};
 
+/// Queue checks between two `sched_yield`s while polling.
+const YIELD_EVERY: u32 = 8;
+
 /// Blocks until `has_samples` says true (returns true) or `timeout` passes
 /// (false), waiting on `listener` as `strategy` and `predictor` plan; records
 /// each arrival in `predictor`. Pending wake-ups of `listener` are consumed.
@@ -43,19 +46,60 @@ pub fn wait_for_samples<E: std::fmt::Debug>(
             WaitPlan::BlockUntil(t) => t.min(deadline),
             WaitPlan::SpinUntil(t) => {
                 let until = t.min(deadline);
+                let mut polls = 0u32;
                 while monotonic_ns() < until {
                     if check()? {
-                        predictor.observe(monotonic_ns());
+                        predictor.observe_polled(monotonic_ns());
                         return Ok(true);
                     }
-                    std::hint::spin_loop();
+                    // Yield now and then, not just spin: a sender woken on this
+                    // core would otherwise wait out the scheduler's wake-up
+                    // granularity (~1 ms measured on 2 cores) behind this loop.
+                    polls = polls.wrapping_add(1);
+                    if polls % YIELD_EVERY == 0 {
+                        std::thread::yield_now();
+                    } else {
+                        std::hint::spin_loop();
+                    }
                 }
                 continue;
             }
         };
         let wait = Duration::from_nanos(block_until.saturating_sub(now));
-        listener.timed_wait(|_| {}, wait).map_err(|e| ("wait", format!("{e:?}")))?;
+        wait_readable(listener, wait).map_err(|e| ("wait", e.to_string()))?;
+        let woke = monotonic_ns();
+        if woke >= block_until && block_until < deadline {
+            predictor.record_wake(block_until, woke);
+        }
     }
+}
+
+/// Blocks until `listener` has a pending wake-up or `timeout` passes (an
+/// interrupting signal ends the wait early, which callers treat as a time-out).
+///
+/// `ppoll` on the listener's socket rather than `Listener::timed_wait`: in
+/// iceoryx2 0.10 that waits through `SO_RCVTIMEO`, which counts whole
+/// scheduler ticks, so a 100 µs time-out took 7–8 ms and a 31 ms one 36 ms
+/// on this machine (docs/BENCHMARKS.md) — spin-then-wait then never woke
+/// before the message. `ppoll`'s time-out runs on high-resolution timers.
+fn wait_readable(listener: &Listener<ipc::Service>, timeout: Duration) -> std::io::Result<()> {
+    // SAFETY: the descriptor belongs to `listener`, which outlives this call;
+    // it is only polled, never stored or closed.
+    let fd = unsafe { listener.file_descriptor().native_handle() };
+    let mut pfd = libc::pollfd { fd, events: libc::POLLIN, revents: 0 };
+    let ts = libc::timespec {
+        tv_sec: timeout.as_secs().min(i32::MAX as u64) as libc::time_t,
+        tv_nsec: timeout.subsec_nanos() as libc::c_long,
+    };
+    // SAFETY: one valid pollfd, a valid timespec, no signal mask change.
+    let r = unsafe { libc::ppoll(&mut pfd, 1, &ts, std::ptr::null()) };
+    if r < 0 {
+        let e = std::io::Error::last_os_error();
+        if e.kind() != std::io::ErrorKind::Interrupted {
+            return Err(e);
+        }
+    }
+    Ok(())
 }
 
 /// Receives the pose messages of one camera.

@@ -84,6 +84,7 @@ impl Ipc {
             builder = builder.name(&name);
         }
         let node = builder.create::<ipc::Service>().map_err(|e| ClientError::Node(format!("{e:?}")))?;
+        restrict_node_counter(&config);
         Ok(Self { node })
     }
 
@@ -107,5 +108,34 @@ impl Ipc {
             CallbackProgression::Continue
         });
         dead
+    }
+}
+
+/// Where iceoryx2 0.10 puts its shared-memory segments on Linux.
+const SHM_DIR: &str = "/dev/shm";
+
+/// iceoryx2 0.10 creates its node-id counter segment
+/// (`<prefix>…_node.<version>.global_mgmt`, one u32) readable and writable by
+/// every local user on purpose (`GlobalManagementSegment::open_or_create`);
+/// another user could disturb node-id generation through it. fusepose's
+/// processes run as one user, so each node narrows the counters of its own
+/// prefix that it owns to 0600. Best effort: a file of another user or a
+/// failed chmod is left as it is (docs/RELIABILITY.md).
+fn restrict_node_counter(config: &Config) {
+    use std::os::unix::fs::{MetadataExt, PermissionsExt};
+    let prefix = config.global.prefix.to_string();
+    let Ok(dir) = std::fs::read_dir(SHM_DIR) else { return };
+    // SAFETY: geteuid has no preconditions.
+    let me = unsafe { libc::geteuid() };
+    for entry in dir.flatten() {
+        let name = entry.file_name();
+        let name = name.to_string_lossy();
+        if !name.starts_with(&prefix) || !name.ends_with(".global_mgmt") {
+            continue;
+        }
+        let Ok(meta) = entry.metadata() else { continue };
+        if meta.uid() == me && meta.permissions().mode() & 0o077 != 0 {
+            let _ = std::fs::set_permissions(entry.path(), std::fs::Permissions::from_mode(0o600));
+        }
     }
 }

@@ -10,6 +10,12 @@
 //! ±2 cm shift of the whole cloud applied to the ground truth as well.
 //! Occluders come from the cluttered scenes; depth noise from the renderer.
 //!
+//! Rendered frames may take their masks from the built-in segmenter instead of
+//! the ground-truth label map ([`SegMasks`], a seeded share of the frames), so
+//! the pose network learns the ragged, partly wrong masks it gets at run time.
+//! A segmenter instance whose points lie farther than one object diameter from
+//! the matched object is dropped (a false positive, not a view of it).
+//!
 //! Alternatively ([`Source::Bop`]) frames come from a BOP dataset whose obj_ids
 //! are the object set's class ids: frames with index % 10 != 0 train, the rest
 //! validate; instances are matched to the ground truth of their class whose
@@ -22,6 +28,7 @@ use std::thread::JoinHandle;
 use self::rand_distr_free::gauss;
 use anyhow::Context;
 use crossbeam::channel::{Receiver, bounded};
+use fusepose_estimator::seg::SegEngine;
 use fusepose_estimator::{
     ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig,
 };
@@ -110,6 +117,21 @@ pub fn bop_indices(ds: &BopDataset, val: bool) -> Vec<usize> {
     (0..ds.len()).filter(|i| (i % 10 == 0) == val).collect()
 }
 
+/// The built-in segmenter as a mask source for a share of the rendered frames.
+pub struct SegMasks {
+    engine: SegEngine,
+    /// Label plane of the current frame (grown to the frame size once).
+    labels: Vec<u16>,
+    /// Share of frames, 0..=1, whose masks come from the segmenter.
+    fraction: f64,
+}
+
+impl SegMasks {
+    pub fn new(engine: SegEngine, fraction: f64) -> Self {
+        Self { engine, labels: Vec::new(), fraction: fraction.clamp(0.0, 1.0) }
+    }
+}
+
 /// Ground truth of one object in a frame, for matching instances.
 struct Truth {
     class_id: u16,
@@ -117,6 +139,8 @@ struct Truth {
     visible: f64,
     /// Centre of the visible box (pixels), if any.
     centre: Option<(f64, f64)>,
+    /// Object diameter (m) when instances may be false positives (segmenter masks).
+    max_offset: Option<f64>,
 }
 
 /// Renders scene `seed` and returns its samples. `ws` and `target` are reused.
@@ -126,6 +150,7 @@ pub fn frame_samples(
     seed: u64,
     ws: &mut Workspace,
     target: &mut RenderTarget,
+    seg: Option<&mut SegMasks>,
 ) -> anyhow::Result<Vec<Sample>> {
     let sampler = SamplerConfig::default();
     let k = Intrinsics::YCB_VIDEO;
@@ -144,13 +169,24 @@ pub fn frame_samples(
         target,
     )
     .context("rendering a scene")?;
-    let frame = FrameView {
+    let mut frame = FrameView {
         intrinsics: k,
         color_format: ColorFormat::Rgb8,
         color: target.rgb(),
         depth: DepthPlane::F32(target.depth_m()),
-        labels: Some(LabelPlane::U16(target.labels())),
+        labels: None,
     };
+    // A seeded per-frame draw, independent of the other random streams.
+    let seg = seg.filter(|s| Pcg64::seed_from_u64(seed ^ 0x5e6_3a5c).random::<f64>() < s.fraction);
+    let from_segmenter = seg.is_some();
+    match seg {
+        Some(s) => {
+            s.labels.resize(k.width as usize * k.height as usize, 0);
+            s.engine.segment(&frame, &mut s.labels).context("segmenting a training frame")?;
+            frame.labels = Some(LabelPlane::U16(&s.labels));
+        }
+        None => frame.labels = Some(LabelPlane::U16(target.labels())),
+    }
     let truths: Vec<Truth> = truth
         .objects
         .iter()
@@ -164,6 +200,9 @@ pub fn frame_samples(
                     (b.v_min + b.v_max) as f64 / 2.0,
                 )
             }),
+            max_offset: from_segmenter
+                .then(|| set.by_class(o.class_id).map(|m| m.diameter))
+                .flatten(),
         })
         .collect();
     samples_from_frame(&frame, &truths, cfg, seed, ws)
@@ -202,6 +241,7 @@ pub fn bop_frame_samples(
                         g.bbox_visib[1] as f64 + g.bbox_visib[3] as f64 / 2.0,
                     )
                 }),
+                max_offset: None,
             })
             .collect();
     samples_from_frame(&frame, &truths, cfg, seed, ws)
@@ -250,6 +290,16 @@ fn samples_from_frame(
             .iter()
             .copied()
             .collect();
+        if let Some(max) = t.max_offset {
+            let mut mean = Vector3::<f64>::zeros();
+            for p in points.chunks_exact(3) {
+                mean += Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            }
+            mean /= (points.len() / 3).max(1) as f64;
+            if (mean - t.pose.translation.vector).norm() > max {
+                continue;
+            }
+        }
         let choose: Vec<u32> = ws.choose.row(i).to_vec();
         let mut pose = t.pose;
         if cfg.augment {
@@ -311,6 +361,7 @@ impl Stream {
         source: Source,
         first_seed: u64,
         capacity: usize,
+        mut seg: Option<SegMasks>,
     ) -> Self {
         let (tx, rx) = bounded(capacity);
         let stop = Arc::new(AtomicBool::new(false));
@@ -329,7 +380,7 @@ impl Stream {
                 let mut next = order.len();
                 while !stop2.load(Ordering::Relaxed) {
                     let samples = match &source {
-                        Source::Rendered => frame_samples(&set, &cfg, seed, &mut ws, &mut target)?,
+                        Source::Rendered => frame_samples(&set, &cfg, seed, &mut ws, &mut target, seg.as_mut())?,
                         Source::Bop(ds) => {
                             if order.is_empty() {
                                 anyhow::bail!("the BOP dataset has no training frames");

@@ -24,7 +24,8 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-use crate::data::{DataConfig, Sample, Source, Stream};
+use crate::data::{DataConfig, Sample, SegMasks, Source, Stream};
+use fusepose_estimator::seg::SegEngine;
 use crate::geometry::{pose_from_parts, rot_rows};
 use crate::loss::{GtInstance, model_tensor, pose_loss, refine_loss};
 use crate::model::FusionNet;
@@ -73,6 +74,9 @@ pub struct TrainOptions {
     /// Human description of the data for the record.
     pub data_desc: String,
     pub progress: bool,
+    /// Share of rendered training frames whose masks come from the segmenter
+    /// embedded in the `resume` file (0 = ground-truth masks only).
+    pub seg_masks: f64,
 }
 
 /// What a finished run reports.
@@ -108,6 +112,23 @@ fn random_rotation(rng: &mut Pcg64, max_angle: f64) -> UnitQuaternion<f64> {
         }
     };
     UnitQuaternion::from_scaled_axis(axis * rng.random_range(0.0..max_angle))
+}
+
+/// The segmenter mask source of `opts.seg_masks` (from the file resumed from).
+fn seg_masks(opts: &TrainOptions, set: &ObjectSet) -> anyhow::Result<Option<SegMasks>> {
+    if opts.seg_masks <= 0.0 {
+        return Ok(None);
+    }
+    if !matches!(opts.source, Source::Rendered) {
+        bail!("segmenter masks are for rendered training frames only");
+    }
+    let path = opts
+        .resume
+        .as_ref()
+        .context("segmenter masks need --resume with a file that embeds a segmenter")?;
+    let engine = SegEngine::load(path, set)
+        .with_context(|| format!("loading the segmenter embedded in {}", path.display()))?;
+    Ok(Some(SegMasks::new(engine, opts.seg_masks)))
 }
 
 /// Runs training and validation; writes `opts.out`.
@@ -187,7 +208,8 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     };
     // Training scenes: a per-seed, per-resume range far from the validation seeds.
     let first_seed = (opts.seed % 1000) * 1_000_000_000 + start_steps * 7 + 1;
-    let mut stream = Stream::spawn(set.clone(), data_cfg, opts.source.clone(), first_seed, 512);
+    let seg = seg_masks(opts, &set)?;
+    let mut stream = Stream::spawn(set.clone(), data_cfg, opts.source.clone(), first_seed, 512, seg);
     let mut rng = Pcg64::seed_from_u64(opts.seed ^ start_steps.wrapping_mul(0x9e37_79b9));
     let mut optim = AdamConfig::new().init();
 

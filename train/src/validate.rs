@@ -56,7 +56,7 @@ pub fn validation_set(
     };
     for f in frames {
         out.extend(match source {
-            Source::Rendered => frame_samples(set, &cfg, f, &mut ws, &mut target)?,
+            Source::Rendered => frame_samples(set, &cfg, f, &mut ws, &mut target, None)?,
             Source::Bop(ds) => bop_frame_samples(ds, f as usize, &cfg, VAL_SEED_BASE + f, &mut ws)?,
         });
         if out.len() >= max_samples {

@@ -32,7 +32,7 @@ fn samples(set: &ObjectSet, cfg: &NetConfig, want: usize) -> Vec<Sample> {
     let mut out = Vec::new();
     let mut seed = 100;
     while out.len() < want {
-        out.extend(frame_samples(set, &dc, seed, &mut ws, &mut target).unwrap());
+        out.extend(frame_samples(set, &dc, seed, &mut ws, &mut target, None).unwrap());
         seed += 1;
     }
     out.truncate(want);

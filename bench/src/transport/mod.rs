@@ -41,6 +41,11 @@ pub struct TransportArgs {
     /// A short run (seconds; for CI).
     #[arg(long)]
     pub smoke: bool,
+    /// Pin the sender to CPU 0 and each receiver to CPU 1 (as a deployment
+    /// pins a camera driver and a consumer). Unpinned, a receiver polling near
+    /// the arrival often shares a core with the woken sender and delays it.
+    #[arg(long)]
+    pub pin: bool,
     /// Folder for the table, PNG and `.hlog`.
     #[arg(long, default_value = "scratch/bench/transport")]
     pub out: PathBuf,
@@ -53,6 +58,7 @@ impl Default for TransportArgs {
             fps: 60.0,
             warmup: 30,
             smoke: false,
+            pin: false,
             out: "scratch/bench/transport".into(),
         }
     }
@@ -71,6 +77,11 @@ pub struct ModeResult {
     pub receiver_cpu_percent: f64,
     /// Sender side: duration of the send call (iceoryx2: `send` + notify; socket: `write_all`).
     pub send_call: Percentiles,
+    /// Receiver's own account: frames caught while polling, percent (iceoryx2 only),
+    /// and its learned arrival jitter and timed wake-up lateness (µs).
+    pub polled_percent: Option<f64>,
+    pub jitter_us: Option<f64>,
+    pub wake_delay_us: Option<f64>,
 }
 
 /// Everything one run measured.
@@ -85,6 +96,7 @@ pub struct TransportReport {
     pub load_after: String,
     pub png: Option<PathBuf>,
     pub hlog: Option<PathBuf>,
+    pub pinned: bool,
 }
 
 impl TransportReport {
@@ -138,6 +150,15 @@ fn collect(
         .next()
         .and_then(|s| s.parse().ok())
         .unwrap_or(f64::NAN);
+    let field = |key: &str| -> Option<f64> {
+        let mut it = line.split_whitespace();
+        it.find(|w| *w == key)?;
+        it.next()?.parse().ok()
+    };
+    let polled_percent = field("polled")
+        .zip(line.split_whitespace().skip_while(|w| *w != "of").nth(1).and_then(|v| v.parse::<f64>().ok()))
+        .map(|(p, n)| 100.0 * p / n.max(1.0));
+    let (jitter_us, wake_delay_us) = (field("jitter_us"), field("wake_delay_us"));
     let mut histogram = latency::histogram();
     for value in std::fs::read_to_string(file)?
         .lines()
@@ -154,6 +175,9 @@ fn collect(
         histogram,
         receiver_cpu_percent: cpu_percent,
         send_call: Percentiles::of(send_call),
+        polled_percent,
+        jitter_us,
+        wake_delay_us,
     })
 }
 
@@ -181,7 +205,7 @@ fn run_iceoryx(
     let child = ChildProcess::spawn(
         "iceoryx2 receiver",
         &child_args,
-        &ns.env(),
+        &receiver_env(args, ns.env()),
         Duration::from_secs(20),
     )?;
     std::thread::sleep(Duration::from_millis(200));
@@ -196,13 +220,15 @@ fn run_iceoryx(
         if let DepthMut::U16(d) = planes.depth {
             d.fill(1000);
         }
+        // Send on the camera's clock: filling 1.5 MB took 0.1–1.9 ms here, and
+        // a camera delivers at its frame rate, not when a copy happens to end.
+        pace(t0, i, period);
         let start = monotonic_ns();
         frame.set_capture_time_ns(start);
         frame.send()?;
         if i >= args.warmup {
             send_call.saturating_record((monotonic_ns() - start).max(1));
         }
-        pace(t0, i, period);
     }
     collect(
         name,
@@ -228,7 +254,12 @@ fn run_socket(args: &TransportArgs, frames: u64) -> anyhow::Result<ModeResult> {
         &file.display().to_string(),
     ]
     .map(String::from);
-    let child = ChildProcess::spawn("socket receiver", &child_args, &[], Duration::from_secs(20))?;
+    let child = ChildProcess::spawn(
+        "socket receiver",
+        &child_args,
+        &receiver_env(args, Vec::new()),
+        Duration::from_secs(20),
+    )?;
     let (mut stream, _) = listener.accept()?;
     let frame_len = FrameLayout::vga_rgbd().payload_len();
     let mut buf = vec![0u8; 8 + frame_len];
@@ -238,13 +269,13 @@ fn run_socket(args: &TransportArgs, frames: u64) -> anyhow::Result<ModeResult> {
     for i in 0..frames {
         buf[8..8 + frame_len * 3 / 5].fill(i as u8);
         buf[8 + frame_len * 3 / 5..].fill(0xe8);
+        pace(t0, i, period);
         let now = monotonic_ns();
         buf[..8].copy_from_slice(&now.to_le_bytes());
         stream.write_all(&buf)?;
         if i >= args.warmup {
             send_call.saturating_record((monotonic_ns() - now).max(1));
         }
-        pace(t0, i, period);
     }
     collect(
         "Unix socket, copy",
@@ -257,8 +288,22 @@ fn run_socket(args: &TransportArgs, frames: u64) -> anyhow::Result<ModeResult> {
 }
 
 /// Runs every transport in turn; progress on stderr.
+/// Environment variable telling a receiver process which CPU to pin itself to.
+pub const PIN_ENV: &str = "FUSEPOSE_BENCH_RECEIVER_CPU";
+
+fn receiver_env(args: &TransportArgs, mut env: Vec<(&'static str, String)>) -> Vec<(&'static str, String)> {
+    if args.pin {
+        env.push((PIN_ENV, "1".into()));
+    }
+    env
+}
+
 pub fn run(args: &TransportArgs) -> anyhow::Result<TransportReport> {
     let load_before = loadavg::loadavg();
+    if args.pin {
+        fusepose_estimator::cpu_pin::pin_current_thread(0)
+            .map_err(|e| anyhow::anyhow!("pinning the sender to CPU 0: {e}"))?;
+    }
     let frames = if args.smoke {
         60.min(args.frames).max(args.warmup + 10)
     } else {
@@ -309,6 +354,7 @@ pub fn run(args: &TransportArgs) -> anyhow::Result<TransportReport> {
         load_after: loadavg::loadavg(),
         png,
         hlog,
+        pinned: args.pin,
     })
 }
 
@@ -316,8 +362,12 @@ pub fn run(args: &TransportArgs) -> anyhow::Result<TransportReport> {
 pub fn render(r: &TransportReport) -> String {
     let mut s = String::new();
     s.push_str(&format!(
-        "transport: 640x480 RGB8 + u16 depth = {} bytes per frame, {} frames per transport at {} fps (first {} not counted)\n",
-        r.frame_bytes, r.frames, r.fps, r.warmup
+        "transport: 640x480 RGB8 + u16 depth = {} bytes per frame, {} frames per transport at {} fps (first {} not counted){}\n",
+        r.frame_bytes,
+        r.frames,
+        r.fps,
+        r.warmup,
+        if r.pinned { "; sender pinned to CPU 0, receivers to CPU 1" } else { "; unpinned" }
     ));
     s.push_str(&format!(
         "loadavg before: {}   cpus: {}\n\n",
@@ -325,7 +375,7 @@ pub fn render(r: &TransportReport) -> String {
         loadavg::cpus()
     ));
     s.push_str(&format!(
-        "{:<44} {:>6} {:>10} {:>10} {:>10} {:>10} {:>6} {:>12} {:>13}\n",
+        "{:<44} {:>6} {:>10} {:>10} {:>10} {:>10} {:>6} {:>12} {:>13} {:>9}\n",
         "transport",
         "n",
         "p50 µs",
@@ -334,12 +384,13 @@ pub fn render(r: &TransportReport) -> String {
         "max µs",
         "lost",
         "recv CPU %",
-        "send p50 µs"
+        "send p50 µs",
+        "polled %"
     ));
     for m in &r.modes {
         let [p50, p99, p999, max] = m.latency.scaled(1e3);
         s.push_str(&format!(
-            "{:<44} {:>6} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>6} {:>12.1} {:>13.1}\n",
+            "{:<44} {:>6} {:>10.1} {:>10.1} {:>10.1} {:>10.1} {:>6} {:>12.1} {:>13.1} {:>9}\n",
             m.name,
             m.latency.count,
             p50,
@@ -348,7 +399,8 @@ pub fn render(r: &TransportReport) -> String {
             max,
             m.lost,
             m.receiver_cpu_percent,
-            m.send_call.p50_ns as f64 / 1e3
+            m.send_call.p50_ns as f64 / 1e3,
+            m.polled_percent.map_or("-".to_owned(), |p| format!("{p:.1}"))
         ));
     }
     s.push('\n');
@@ -364,6 +416,14 @@ pub fn render(r: &TransportReport) -> String {
             busy.latency.p50_ns as f64 / 1e3
         ));
     }
+    if let Some(m) = r.mode("iox-spin") {
+        s.push_str(&format!(
+            "spin-then-wait receiver: arrival jitter {:.1} µs, timed wake-up lateness {:.1} µs (learned)\n",
+            m.jitter_us.unwrap_or(f64::NAN),
+            m.wake_delay_us.unwrap_or(f64::NAN)
+        ));
+    }
+    s.push_str("polled % = frames the receiver found while polling (the rest woke it through the event).\n");
     s.push_str("send p50 = the sender's send call (iceoryx2: send + event notify; socket: write_all), part of the latency.\n");
     if let Some(p) = &r.png {
         s.push_str(&format!("png: {}\n", p.display()));

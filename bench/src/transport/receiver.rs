@@ -35,11 +35,17 @@ pub fn main(args: &[String]) -> anyhow::Result<()> {
         args.len() == 5,
         "usage: transport-receiver iox|uds STRATEGY|SOCKET FRAMES WARMUP FILE"
     );
+    if let Ok(cpu) = std::env::var(super::PIN_ENV) {
+        let cpu: usize = cpu.parse()?;
+        fusepose_estimator::cpu_pin::pin_current_thread(cpu)
+            .map_err(|e| anyhow::anyhow!("pinning the receiver to CPU {cpu}: {e}"))?;
+    }
     let frames: u64 = args[2].parse()?;
     let warmup: u64 = args[3].parse()?;
     let mut latencies = Vec::with_capacity(frames as usize);
     let (cpu0, wall0) = (process_cpu_ms(), Instant::now());
     let mut checksum = 0u64;
+    let mut polling = String::new();
     match args[0].as_str() {
         "iox" => {
             let strategy = strategy(&args[1])?;
@@ -86,6 +92,12 @@ pub fn main(args: &[String]) -> anyhow::Result<()> {
                     last_sequence = planes.header.sequence;
                 }
             }
+            let (arrivals, polled) = predictor.hits();
+            polling = format!(
+                " polled {polled} of {arrivals} jitter_us {:.1} wake_delay_us {:.1}",
+                predictor.jitter_ns() as f64 / 1e3,
+                predictor.wake_delay_ns() as f64 / 1e3
+            );
         }
         "uds" => {
             let mut stream = UnixStream::connect(&args[1])?;
@@ -108,6 +120,6 @@ pub fn main(args: &[String]) -> anyhow::Result<()> {
     let cpu_percent = (process_cpu_ms() - cpu0) / (wall0.elapsed().as_secs_f64() * 1e3) * 100.0;
     let text: String = latencies.iter().map(|v| format!("{v}\n")).collect();
     std::fs::write(&args[4], text)?;
-    println!("result {cpu_percent:.2} checksum {checksum}");
+    println!("result {cpu_percent:.2} checksum {checksum}{polling}");
     Ok(())
 }
