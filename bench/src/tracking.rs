@@ -44,7 +44,7 @@ pub struct TrackingArgs {
     #[arg(long, default_value_t = 8.0)]
     pub max_fit_mm: f64,
     /// Tracking: a full estimate at least every this many frames.
-    #[arg(long, default_value_t = 10)]
+    #[arg(long, default_value_t = 5)]
     pub full_estimate_every: u32,
     /// Tracking: refiner iterations from the previous pose.
     #[arg(long, default_value_t = 2)]
@@ -66,7 +66,7 @@ impl Default for TrackingArgs {
             degrees_per_frame: 0.5,
             weights: "models/builtin.safetensors".into(),
             max_fit_mm: 8.0,
-            full_estimate_every: 10,
+            full_estimate_every: 5,
             tracking_iterations: 2,
             smoke: false,
             out: "scratch/bench/tracking".into(),

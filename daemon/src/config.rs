@@ -101,7 +101,7 @@ pub struct TrackingSettings {
 
 impl Default for TrackingSettings {
     fn default() -> Self {
-        Self { enabled: false, max_fit_mm: 8.0, full_estimate_every: 10, refine_iterations: 2 }
+        Self { enabled: false, max_fit_mm: 8.0, full_estimate_every: 5, refine_iterations: 2 }
     }
 }
 
@@ -335,7 +335,7 @@ mod tests {
         )
         .unwrap();
         assert!(!c.estimator.deadline_aware && c.estimator.tracking.enabled && c.ipc.receive_spin_us == 0);
-        assert_eq!((c.estimator.tracking.max_fit_mm, c.estimator.tracking.full_estimate_every), (5.0, 10));
+        assert_eq!((c.estimator.tracking.max_fit_mm, c.estimator.tracking.full_estimate_every), (5.0, 5));
         let err = DaemonConfig::parse("[estimator.tracking]\nfull_estimate_every = 0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.tracking.full_estimate_every"), "{err}");
         let err = DaemonConfig::parse("[estimator]\npin_cpus = [0, 1, 2]\n").unwrap_err().to_string();

@@ -32,7 +32,7 @@ impl Default for TrackingConfig {
     fn default() -> Self {
         Self {
             max_fit_m: 0.008,
-            full_estimate_every: 10,
+            full_estimate_every: 5,
             refine_iterations: 2,
         }
     }

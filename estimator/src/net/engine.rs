@@ -9,7 +9,7 @@ use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
 use ndarray::{Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis, s};
 
 use super::config::NetConfig;
-use super::gemm::{conv3x3, dense, gemm_acc};
+use super::gemm::{cols_len, conv3x3, dense, gemm_acc};
 use super::weights::{NetLoadError, WeightFile};
 
 /// A dense layer `[in, out]` + bias.
@@ -187,11 +187,11 @@ impl Scratch {
     pub fn new(c: &NetConfig, n: usize, s: usize) -> Self {
         let [c1, c2, c3] = c.cnn;
         let (s2, s4) = ((s / 2) * (s / 2), (s / 4) * (s / 4));
-        let cols = (3 * 9 * s * s)
-            .max(c1 * 9 * s2)
-            .max(c2 * 9 * s4)
-            .max(c3 * 9 * s4)
-            .max((c3 + c2) * 9 * s2);
+        let cols = cols_len(3, s * s)
+            .max(cols_len(c1, s2))
+            .max(cols_len(c2, s4))
+            .max(cols_len(c3, s4))
+            .max(cols_len(c3 + c2, s2));
         let lw = c.local_width();
         let z = |r: usize, k: usize| Array2::<f32>::zeros((r, k));
         Self {

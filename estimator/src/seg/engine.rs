@@ -17,7 +17,7 @@ use super::file::SegFile;
 use super::input::FrameMap;
 use crate::frame::{FrameError, FrameView};
 use crate::net::NetLoadError;
-use crate::net::gemm::{conv3x3, gemm_acc};
+use crate::net::gemm::{cols_len, conv3x3, gemm_acc};
 use crate::net::meta::ObjectEntry;
 
 /// Why a frame could not be segmented.
@@ -201,7 +201,7 @@ impl SegEngine {
             .layers()
             .into_iter()
             .zip([1, 2, 3, 4, 3, 2, 1, 1])
-            .map(|((_, i, _, k, _), l)| i * k * k * hw(l))
+            .map(|((_, i, _, k, _), l)| if k == 3 { cols_len(i, hw(l)) } else { i * k * k * hw(l) })
             .max()
             .unwrap_or(0);
         let up = [(4, 3), (3, 2), (2, 1)]
