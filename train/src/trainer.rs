@@ -26,6 +26,7 @@ use rand_pcg::Pcg64;
 
 use crate::data::{DataConfig, Sample, SegMasks, Source, Stream};
 use fusepose_estimator::seg::SegEngine;
+use fusepose_estimator::seg::file::{SegFile, embed, has_embedded};
 use crate::geometry::{pose_from_parts, rot_rows};
 use crate::loss::{GtInstance, model_tensor, pose_loss, refine_loss};
 use crate::model::FusionNet;
@@ -522,6 +523,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     record.metrics = validation.metrics.clone();
     store::save(&net, &cfg, &objects, &record, &opts.out)?;
     store::save(&net, &cfg, &objects, &record, &ckpt)?;
+    if let Some(resume) = &opts.resume
+        && carry_segmenter(resume, &opts.out)?
+    {
+        log.line(&format!("# kept the segmenter embedded in {}", resume.display()));
+    }
     log.line(&format!("# wrote {}", opts.out.display()));
     Ok(TrainSummary {
         record,
@@ -529,6 +535,23 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         out: opts.out.clone(),
         step_ms: step_time * 1000.0,
     })
+}
+
+/// Embeds the segmenter of `resume` (if it has one) into the freshly written
+/// `out`, so retraining the pose network keeps the file's segmenter. Returns
+/// whether there was one.
+fn carry_segmenter(resume: &Path, out: &Path) -> anyhow::Result<bool> {
+    let bytes = std::fs::read(resume).with_context(|| format!("reading {}", resume.display()))?;
+    let Ok((_, header)) = safetensors::SafeTensors::read_metadata(&bytes) else { return Ok(false) };
+    if !has_embedded(&header.metadata().clone().unwrap_or_default()) {
+        return Ok(false);
+    }
+    let seg = SegFile::from_bytes(&bytes)
+        .with_context(|| format!("reading the segmenter embedded in {}", resume.display()))?;
+    let pose = std::fs::read(out).with_context(|| format!("reading {}", out.display()))?;
+    let merged = embed(&pose, &seg).with_context(|| format!("embedding the segmenter into {}", out.display()))?;
+    std::fs::write(out, merged).with_context(|| format!("writing {}", out.display()))?;
+    Ok(true)
 }
 
 /// Seconds since the Unix epoch (no clock crate needed for a log stamp).

@@ -1,0 +1,55 @@
+//! `fusepose_train::trainer::train` end to end, briefly: resume the shipped
+//! model for two steps with half the frames masked by its own segmenter, then
+//! validate. The written file loads in the inference engine, counts the
+//! resumed steps, and keeps the segmenter the resumed file embedded (the
+//! pose trainer writes pose tensors only; the segmenter is carried over).
+
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::Duration;
+
+use fusepose_estimator::net::WeightFile;
+use fusepose_estimator::seg::file::SegFile;
+use fusepose_scene::builtin::builtin_objects;
+use fusepose_train::data::Source;
+use fusepose_train::trainer::{Stage, TrainOptions, train};
+
+#[test]
+fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
+    let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+    let dir = std::env::temp_dir().join(format!("fusepose-train-run-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let out = dir.join("out.safetensors");
+    let start = WeightFile::read(&shipped).unwrap().train.unwrap_or_default().steps;
+    let opts = TrainOptions {
+        out: out.clone(),
+        minutes: None,
+        steps: Some(start + 2),
+        resume: Some(shipped.clone()),
+        stage: Stage::Both,
+        batch: 2,
+        seed: 9,
+        lr: 1e-5,
+        loss_points: 100,
+        checkpoint_dir: dir.clone(),
+        checkpoint_every: Duration::from_secs(3600),
+        log: None,
+        val_frames: 2,
+        val_max_samples: 4,
+        config: None,
+        source: Source::Rendered,
+        data_desc: "test".into(),
+        progress: false,
+        seg_masks: 0.5,
+    };
+    let summary = train(Arc::new(builtin_objects()), &opts).unwrap();
+    assert_eq!(summary.record.steps, start + 2);
+    let file = WeightFile::read(&out).unwrap();
+    assert_eq!(file.train.unwrap().steps, start + 2);
+    let (ours, theirs) = (SegFile::read(&out).unwrap(), SegFile::read(&shipped).unwrap());
+    assert_eq!(ours.config, theirs.config);
+    for (name, _) in ours.config.tensor_shapes() {
+        assert_eq!(ours.tensor(&name).unwrap(), theirs.tensor(&name).unwrap(), "segmenter tensor {name}");
+    }
+    let _ = std::fs::remove_dir_all(&dir);
+}
