@@ -92,6 +92,10 @@ pub struct Args {
     /// become background (default: the engine's, 6).
     #[arg(long)]
     pub seg_min_cells: Option<usize>,
+    /// `--masks net`: regions whose long side² / area exceeds this become
+    /// background (strips; 0 = keep all; default: the engine's).
+    #[arg(long)]
+    pub seg_max_elongation: Option<f32>,
     /// Write one PNG per frame here: labels tinted (the segmenter's with `--masks net`),
     /// the poses of the last estimator drawn.
     #[arg(long)]
@@ -114,6 +118,10 @@ pub struct Args {
     /// `net`: refiner iterations per object (default: the weight file's, 2).
     #[arg(long)]
     pub refine_iterations: Option<usize>,
+    /// Drop estimates less confident than this (0..1), as the daemon's
+    /// `estimator.min_confidence` does.
+    #[arg(long, default_value_t = 0.0)]
+    pub min_confidence: f32,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -145,7 +153,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let weights = args.seg_weights.as_ref().or(args.weights.as_ref()).context(
                 "--masks net needs --weights FILE with an embedded segmenter (or --seg-weights FILE)",
             )?;
-            Some(NetMasks::load(weights, &objects, args.seg_min_cells)?)
+            Some(NetMasks::load(weights, &objects, args.seg_min_cells, args.seg_max_elongation)?)
         }
     };
     let metrics = objects
@@ -235,6 +243,10 @@ struct Runner {
     object_ms: Vec<f64>,
     /// Frames refused by validation, by reason.
     refused: BTreeMap<&'static str, usize>,
+    /// Estimates matched to no ground-truth object (ghost objects: a false
+    /// instance of the masks, or a second instance of an object).
+    unmatched: usize,
+    min_confidence: f32,
     csv: Option<BopResultsWriter>,
 }
 
@@ -279,6 +291,8 @@ impl Runner {
             frame_ms: Vec::new(),
             object_ms: Vec::new(),
             refused: BTreeMap::new(),
+            unmatched: 0,
+            min_confidence: args.min_confidence,
             csv,
         })
     }
@@ -298,6 +312,7 @@ impl Runner {
             Ok(_) => self.estimator.estimate(&view, &mut self.workspace, &mut self.poses).map(|_| ()),
             Err(e) => Err(e.into()),
         };
+        self.poses.retain_confident(self.min_confidence);
         let seconds = start.elapsed().as_secs_f64();
         if let Err(e) = estimated {
             let reason = match &e {
@@ -313,7 +328,9 @@ impl Runner {
             let per_object = seconds * 1e3 / self.poses.len() as f64;
             self.object_ms.extend(std::iter::repeat_n(per_object, self.poses.len()));
         }
-        for (gt, est) in match_estimates(&frame.gt, self.poses.as_slice()) {
+        let pairs = match_estimates(&frame.gt, self.poses.as_slice());
+        self.unmatched += self.poses.len() - pairs.iter().filter(|(_, e)| e.is_some()).count();
+        for (gt, est) in pairs {
             let errors = est.zip(metrics.get(gt.class_id as usize - 1)).map(|(e, m)| m.errors(&pose_of(e), &gt.pose));
             self.table.record(gt.class_id, errors);
         }
@@ -338,6 +355,11 @@ impl Runner {
         let (fm, fp) = (percentile(&self.frame_ms, 0.5), percentile(&self.frame_ms, 0.99));
         let (om, op) = (percentile(&self.object_ms, 0.5), percentile(&self.object_ms, 0.99));
         println!("time per frame: median {fm:.2} ms, p99 {fp:.2} ms; per object: median {om:.2} ms, p99 {op:.2} ms");
+        println!(
+            "estimates matched to no object: {} ({:.2} per frame)",
+            self.unmatched,
+            self.unmatched as f64 / self.frame_ms.len().max(1) as f64
+        );
         if !self.refused.is_empty() {
             println!("frames refused: {:?}", self.refused);
         }
@@ -361,6 +383,7 @@ impl Runner {
             o.insert("ms_per_object_p99".into(), percentile(&self.object_ms, 0.99).into());
             o.insert("frames".into(), self.frame_ms.len().into());
             o.insert("frames_refused".into(), self.refused.values().sum::<usize>().into());
+            o.insert("unmatched_estimates".into(), self.unmatched.into());
         }
         let per_object: serde_json::Map<String, serde_json::Value> =
             self.table.rows().iter().map(|r| (r.name.clone(), row(r))).collect();

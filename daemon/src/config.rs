@@ -79,6 +79,10 @@ pub struct EstimatorConfig {
     /// Network: fit each frame into its deadline (fewer refiner iterations,
     /// then fewer points; the message then carries DEGRADED).
     pub deadline_aware: bool,
+    /// Poses with a lower confidence (0..1) are not published. 0 publishes
+    /// all; with segmenter masks 0.05 drops about half of the ghost objects
+    /// (docs/BENCHMARKS.md, "Built-in segmenter").
+    pub min_confidence: f32,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
     pub pin_cpus: Vec<usize>,
@@ -162,6 +166,7 @@ impl Default for EstimatorConfig {
             worker_threads: 1,
             masks: MaskSource::Auto,
             deadline_aware: true,
+            min_confidence: 0.0,
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }
@@ -244,6 +249,9 @@ impl DaemonConfig {
         }
         if e.refine_iterations > 1000 {
             return Err(invalid("estimator.refine_iterations", e.refine_iterations, "must be at most 1000"));
+        }
+        if !(0.0..=1.0).contains(&e.min_confidence) {
+            return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
         }
         if e.worker_threads == 0 || e.worker_threads > 64 {
             return Err(invalid("estimator.worker_threads", e.worker_threads, "must be in 1..=64"));
@@ -336,6 +344,9 @@ mod tests {
         .unwrap();
         assert!(!c.estimator.deadline_aware && c.estimator.tracking.enabled && c.ipc.receive_spin_us == 0);
         assert_eq!((c.estimator.tracking.max_fit_mm, c.estimator.tracking.full_estimate_every), (5.0, 5));
+        let err = DaemonConfig::parse("[estimator]\nmin_confidence = 1.5\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.min_confidence"), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\nmin_confidence = 0.05\n").unwrap().estimator.min_confidence, 0.05);
         let err = DaemonConfig::parse("[estimator.tracking]\nfull_estimate_every = 0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.tracking.full_estimate_every"), "{err}");
         let err = DaemonConfig::parse("[estimator]\npin_cpus = [0, 1, 2]\n").unwrap_err().to_string();

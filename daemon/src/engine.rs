@@ -31,6 +31,8 @@ pub struct EngineSpec {
     /// The built-in segmenter (checked against the object set), when masks may come from it.
     pub segmenter: Option<Arc<SegFile>>,
     pub masks: MaskSource,
+    /// Poses less confident than this are not published (`estimator.min_confidence`).
+    pub min_confidence: f32,
 }
 
 /// The object set named by `estimator.objects`.
@@ -85,6 +87,7 @@ fn segmenter(config: &EstimatorConfig, objects: &ObjectSet) -> anyhow::Result<Op
 /// Resolves `[estimator]`: loads objects, applies the net → ICP fallback, loads the segmenter.
 pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     let mut spec = resolve_estimator(config)?;
+    spec.min_confidence = config.min_confidence;
     if spec.factory.is_some() {
         let objects = load_objects(config)?;
         spec.segmenter = segmenter(config, &objects)?;
@@ -110,6 +113,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             workspace,
             segmenter: None,
             masks: MaskSource::Labels,
+            min_confidence: 0.0,
         })
     };
     match config.kind {
@@ -120,6 +124,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             workspace,
             segmenter: None,
             masks: MaskSource::Labels,
+            min_confidence: 0.0,
         }),
         EstimatorKind::Icp => icp(),
         EstimatorKind::Net => {
@@ -181,6 +186,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         workspace,
         segmenter: None,
         masks: MaskSource::Labels,
+        min_confidence: 0.0,
     })
 }
 
@@ -212,6 +218,8 @@ pub struct PoseEngine {
     labels: Vec<u16>,
     /// `estimator.deadline_aware = false`: deadlines are not passed on.
     ignore_deadlines: bool,
+    /// Poses less confident than this are dropped after each estimate.
+    min_confidence: f32,
 }
 
 /// Stage durations of one frame, ns (0 = stage not run).
@@ -237,6 +245,7 @@ impl PoseEngine {
             masks: spec.masks,
             labels: Vec::new(),
             ignore_deadlines: false,
+            min_confidence: spec.min_confidence,
         })
     }
 
@@ -251,6 +260,7 @@ impl PoseEngine {
             masks: MaskSource::Labels,
             labels: Vec::new(),
             ignore_deadlines: false,
+            min_confidence: 0.0,
         })
     }
 
@@ -288,7 +298,10 @@ impl PoseEngine {
         times[Stage::Sampling as usize] = t1 - t0;
         times[self.estimate_stage as usize] = t2 - t1;
         match result {
-            Ok(()) => Ok(()),
+            Ok(()) => {
+                self.poses.retain_confident(self.min_confidence);
+                Ok(())
+            }
             Err(EstimateError::Frame(e)) => Err(EngineFailure::Refused(e)),
             Err(e) => Err(EngineFailure::Estimate(e)),
         }

@@ -48,6 +48,16 @@ impl PoseSet {
         true
     }
 
+    /// Drops the poses whose confidence is below `min` (NaN counts as below);
+    /// returns how many were dropped. No allocation.
+    pub fn retain_confident(&mut self, min: f32) -> usize {
+        let before = self.poses.len();
+        if min > 0.0 {
+            self.poses.retain(|p| p.confidence >= min);
+        }
+        before - self.poses.len()
+    }
+
     pub fn as_slice(&self) -> &[ObjectPose] {
         &self.poses
     }
@@ -62,5 +72,36 @@ impl PoseSet {
 
     pub fn capacity(&self) -> usize {
         self.capacity
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn pose(class_id: u16, confidence: f32) -> ObjectPose {
+        ObjectPose {
+            class_id,
+            instance_id: 0,
+            rotation: UnitQuaternion::identity(),
+            translation: Vector3::new(0.0, 0.0, 0.5),
+            confidence,
+            mask_pixels: 100,
+            bbox: [0, 0, 9, 9],
+            iterations: 0,
+        }
+    }
+
+    #[test]
+    fn retain_confident_drops_low_and_nan_confidence_in_order() {
+        let mut set = PoseSet::with_capacity(4);
+        for (c, conf) in [(1, 0.5), (2, 0.01), (3, f32::NAN), (4, 0.05)] {
+            assert!(set.push(pose(c, conf)));
+        }
+        assert_eq!(set.retain_confident(0.0), 0, "0 keeps everything, NaN included");
+        assert_eq!(set.retain_confident(0.05), 2);
+        let kept: Vec<u16> = set.as_slice().iter().map(|p| p.class_id).collect();
+        assert_eq!(kept, [1, 4]);
+        assert_eq!(set.capacity(), 4);
     }
 }

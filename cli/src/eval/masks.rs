@@ -31,6 +31,7 @@ impl NetMasks {
         weights: &Path,
         objects: &ObjectSet,
         min_cells: Option<usize>,
+        max_elongation: Option<f32>,
     ) -> anyhow::Result<Self> {
         let mut engine = SegEngine::load(weights, objects).with_context(|| {
             format!(
@@ -40,6 +41,9 @@ impl NetMasks {
         })?;
         if let Some(n) = min_cells {
             engine.set_min_component_cells(n);
+        }
+        if let Some(e) = max_elongation {
+            engine.set_max_elongation(e);
         }
         Ok(Self {
             engine,

@@ -66,6 +66,9 @@ fn upsample(src: &[f32], c: usize, wi: usize, ys: &[usize], xs: &[usize], dst: &
 /// output cell is 8x8 pixels of a 640x480 frame at the default 160x120 input).
 pub const MIN_COMPONENT_CELLS: usize = 6;
 
+/// Default [`SegEngine::set_max_elongation`] (0 = off, for the measurement).
+pub const MAX_ELONGATION: f32 = 0.0;
+
 /// Relabels 4-connected regions of one non-zero class smaller than `min_cells`
 /// as background (0) in the `w`-wide grid `cells`. `seen`, `stack` and
 /// `members` are scratch of `cells.len()` capacity (never grown).
@@ -73,11 +76,12 @@ fn drop_small_components(
     cells: &mut [u16],
     w: usize,
     min_cells: usize,
+    max_elongation: f32,
     seen: &mut [bool],
     stack: &mut Vec<u32>,
     members: &mut Vec<u32>,
 ) {
-    if min_cells <= 1 || w == 0 {
+    if (min_cells <= 1 && max_elongation <= 0.0) || w == 0 {
         return;
     }
     let h = cells.len() / w;
@@ -91,9 +95,11 @@ fn drop_small_components(
         members.clear();
         stack.push(start as u32);
         seen[start] = true;
+        let (mut x0, mut x1, mut y0, mut y1) = (usize::MAX, 0, usize::MAX, 0);
         while let Some(i) = stack.pop() {
             members.push(i);
             let (x, y) = (i as usize % w, i as usize / w);
+            (x0, x1, y0, y1) = (x0.min(x), x1.max(x), y0.min(y), y1.max(y));
             let mut visit = |j: usize| {
                 if !seen[j] && cells[j] == class {
                     seen[j] = true;
@@ -113,7 +119,10 @@ fn drop_small_components(
                 visit(i as usize + w);
             }
         }
-        if members.len() < min_cells {
+        // Elongation = long side² / area: 1 for a square, 13 for a 40×3 strip.
+        let long = (x1 - x0 + 1).max(y1 - y0 + 1) as f32;
+        let strip = max_elongation > 0.0 && long * long / members.len() as f32 > max_elongation;
+        if members.len() < min_cells || strip {
             for &i in members.iter() {
                 cells[i as usize] = 0;
             }
@@ -159,6 +168,7 @@ pub struct SegEngine {
     cols: Vec<f32>,
     cells: Vec<u16>,
     min_component_cells: usize,
+    max_elongation: f32,
     erode: bool,
     /// Eroded cell labels (when `erode`).
     eroded: Vec<u16>,
@@ -219,6 +229,7 @@ impl SegEngine {
             cols: vec![0.0; cols],
             cells: vec![0; hw(1)],
             min_component_cells: MIN_COMPONENT_CELLS,
+            max_elongation: MAX_ELONGATION,
             erode: true,
             eroded: vec![0; hw(1)],
             seen: vec![false; hw(1)],
@@ -258,6 +269,13 @@ impl SegEngine {
         self.min_component_cells = cells;
     }
 
+    /// Same-class regions whose long side² / area exceeds `elongation` become
+    /// background (0 = off): long thin strips, such as the table's front edge
+    /// that the segmenter sometimes labels as an object, are not objects.
+    pub fn set_max_elongation(&mut self, elongation: f32) {
+        self.max_elongation = elongation;
+    }
+
     /// Whether region borders (one output cell wide) are written as background
     /// (default: yes). Cell-sized label steps put up to half a cell of background
     /// into an object's mask, and those points cost the pose network far more
@@ -286,6 +304,7 @@ impl SegEngine {
             &mut self.cells,
             out_w,
             self.min_component_cells,
+            self.max_elongation,
             &mut self.seen,
             &mut self.stack,
             &mut self.members,
@@ -396,9 +415,9 @@ mod tests {
         let n = cells.len();
         let (mut seen, mut stack, mut members) = (vec![false; n], Vec::with_capacity(n), Vec::with_capacity(n));
         let original = cells.clone();
-        drop_small_components(&mut cells, 6, 1, &mut seen, &mut stack, &mut members);
+        drop_small_components(&mut cells, 6, 1, 0.0, &mut seen, &mut stack, &mut members);
         assert_eq!(cells, original, "min 1 keeps everything");
-        drop_small_components(&mut cells, 6, 3, &mut seen, &mut stack, &mut members);
+        drop_small_components(&mut cells, 6, 3, 0.0, &mut seen, &mut stack, &mut members);
         #[rustfmt::skip]
         let expect: Vec<u16> = vec![
             1, 1, 1, 0, 0, 0,
@@ -409,7 +428,7 @@ mod tests {
         assert_eq!(cells, expect);
         // Diagonal neighbours are not connected; a region of exactly min_cells stays.
         let mut diag: Vec<u16> = vec![3, 0, 0, 3, 3, 3];
-        drop_small_components(&mut diag, 2, 2, &mut seen, &mut stack, &mut members);
+        drop_small_components(&mut diag, 2, 2, 0.0, &mut seen, &mut stack, &mut members);
         assert_eq!(diag, vec![0, 0, 0, 3, 3, 3]);
         assert!(stack.capacity() >= n && members.capacity() >= n);
     }
