@@ -173,6 +173,31 @@ impl ArrivalPredictor {
     }
 }
 
+/// Queue checks between two `sched_yield`s while polling.
+const YIELD_EVERY: u32 = 8;
+
+/// Calls `check` until it gives `Some` or the `CLOCK_MONOTONIC` time
+/// `until_ns` passes (then `None`). Yields the CPU every few checks instead of
+/// only spinning: a publisher woken on this core would otherwise wait out the
+/// scheduler's wake-up granularity (~1 ms measured on 2 cores) behind the loop.
+pub fn poll_until<T, E>(until_ns: u64, mut check: impl FnMut() -> Result<Option<T>, E>) -> Result<Option<T>, E> {
+    let mut polls = 0u32;
+    loop {
+        if let Some(v) = check()? {
+            return Ok(Some(v));
+        }
+        if crate::monotonic_ns() >= until_ns {
+            return Ok(None);
+        }
+        polls = polls.wrapping_add(1);
+        if polls % YIELD_EVERY == 0 {
+            std::thread::yield_now();
+        } else {
+            std::hint::spin_loop();
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

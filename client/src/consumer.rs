@@ -11,12 +11,9 @@ use iceoryx2::port::listener::Listener;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 
-use crate::arrival::{ArrivalPredictor, WaitPlan, WaitStrategy};
+use crate::arrival::{ArrivalPredictor, WaitPlan, WaitStrategy, poll_until};
 use crate::services::CameraServices;
 use crate::{ClientError, Ipc, PoseMessage, StatsRequest, StatsSnapshot, WIRE_VERSION, monotonic_ns};
-
-/// Queue checks between two `sched_yield`s while polling.
-const YIELD_EVERY: u32 = 8;
 
 /// Blocks until `has_samples` says true (returns true) or `timeout` passes
 /// (false), waiting on `listener` as `strategy` and `predictor` plan; records
@@ -45,22 +42,9 @@ pub fn wait_for_samples<E: std::fmt::Debug>(
             WaitPlan::Block => deadline,
             WaitPlan::BlockUntil(t) => t.min(deadline),
             WaitPlan::SpinUntil(t) => {
-                let until = t.min(deadline);
-                let mut polls = 0u32;
-                while monotonic_ns() < until {
-                    if check()? {
-                        predictor.observe_polled(monotonic_ns());
-                        return Ok(true);
-                    }
-                    // Yield now and then, not just spin: a sender woken on this
-                    // core would otherwise wait out the scheduler's wake-up
-                    // granularity (~1 ms measured on 2 cores) behind this loop.
-                    polls = polls.wrapping_add(1);
-                    if polls % YIELD_EVERY == 0 {
-                        std::thread::yield_now();
-                    } else {
-                        std::hint::spin_loop();
-                    }
+                if poll_until(t.min(deadline), || check().map(|ready| ready.then_some(())))?.is_some() {
+                    predictor.observe_polled(monotonic_ns());
+                    return Ok(true);
                 }
                 continue;
             }

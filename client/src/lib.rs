@@ -23,7 +23,7 @@ mod services;
 mod stats;
 
 pub use clock::monotonic_ns;
-pub use arrival::{ArrivalPredictor, WaitPlan, WaitStrategy};
+pub use arrival::{ArrivalPredictor, WaitPlan, WaitStrategy, poll_until};
 pub use consumer::{Consumer, StatsClient, wait_for_samples};
 pub use error::ClientError;
 pub use frame_decode::{DepthData, FramePlanes, FrameRejection, LabelData, decode_frame};

@@ -5,7 +5,7 @@ use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Duration;
 
-use fusepose_client::{ArrivalPredictor, Ipc, Stage, WaitPlan, WaitStrategy, monotonic_ns};
+use fusepose_client::{ArrivalPredictor, Ipc, Stage, WaitPlan, WaitStrategy, monotonic_ns, poll_until};
 use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetAttachmentId, WaitSetRunResult};
 
@@ -41,15 +41,8 @@ fn write_windows(log: &mut Option<IntervalLog>, states: &[CameraState], end_ns: 
 
 /// Polls every camera's frame queue until one has a frame (its index) or `until_ns` passes.
 fn poll_frames(ports: &[CameraPorts], until_ns: u64) -> Option<usize> {
-    loop {
-        if let Some(i) = ports.iter().position(|p| p.frames.has_samples().unwrap_or(false)) {
-            return Some(i);
-        }
-        if monotonic_ns() >= until_ns {
-            return None;
-        }
-        std::hint::spin_loop();
-    }
+    let ready = || Ok::<_, ()>(ports.iter().position(|p| p.frames.has_samples().unwrap_or(false)));
+    poll_until(until_ns, ready).unwrap_or(None)
 }
 
 /// Runs the daemon until SIGINT/SIGTERM (or `stop` becomes true).
