@@ -26,6 +26,7 @@ pub fn wait_for_samples<E: std::fmt::Debug>(
     timeout: Duration,
 ) -> Result<bool, (&'static str, String)> {
     let deadline = monotonic_ns().saturating_add(timeout.as_nanos() as u64);
+    let strategy = strategy.resolve();
     let mut check = || has_samples().map_err(|e| ("receive", format!("{e:?}")));
     loop {
         // Consume pending wake-ups first so the next wait really blocks.
@@ -42,7 +43,8 @@ pub fn wait_for_samples<E: std::fmt::Debug>(
             WaitPlan::Block => deadline,
             WaitPlan::BlockUntil(t) => t.min(deadline),
             WaitPlan::SpinUntil(t) => {
-                if poll_until(t.min(deadline), || check().map(|ready| ready.then_some(())))?.is_some() {
+                let yield_cpu = strategy != WaitStrategy::BusyPoll;
+                if poll_until(t.min(deadline), yield_cpu, || check().map(|ready| ready.then_some(())))?.is_some() {
                     predictor.observe_polled(monotonic_ns());
                     return Ok(true);
                 }
@@ -109,10 +111,10 @@ impl Consumer {
             port: "listener",
             detail: format!("{e:?}"),
         })?;
-        Ok(Self { services, subscriber, listener, strategy: WaitStrategy::DEFAULT_SPIN, predictor: ArrivalPredictor::default() })
+        Ok(Self { services, subscriber, listener, strategy: WaitStrategy::DEFAULT, predictor: ArrivalPredictor::default() })
     }
 
-    /// How [`Consumer::wait`] and [`Consumer::wait_ready`] wait (default [`WaitStrategy::DEFAULT_SPIN`]).
+    /// How [`Consumer::wait`] and [`Consumer::wait_ready`] wait (default [`WaitStrategy::DEFAULT`]: spin-then-wait when the thread is pinned to one CPU, else block).
     pub fn set_wait_strategy(&mut self, strategy: WaitStrategy) {
         self.strategy = strategy;
     }

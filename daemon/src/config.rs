@@ -134,7 +134,8 @@ pub struct IpcConfig {
     /// Period of the loop's housekeeping tick (stats requests, windows, cleanup), milliseconds.
     pub tick_ms: u64,
     /// Poll for the next frame from this long before it is due (the camera
-    /// period is learned) instead of waiting for the event wake-up, µs (0 = never).
+    /// period is learned) instead of waiting for the event wake-up, µs (0 =
+    /// never). Applies only when the loop thread is pinned (`estimator.pin_cpus`).
     pub receive_spin_us: u64,
 }
 

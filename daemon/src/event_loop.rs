@@ -42,7 +42,7 @@ fn write_windows(log: &mut Option<IntervalLog>, states: &[CameraState], end_ns: 
 /// Polls every camera's frame queue until one has a frame (its index) or `until_ns` passes.
 fn poll_frames(ports: &[CameraPorts], until_ns: u64) -> Option<usize> {
     let ready = || Ok::<_, ()>(ports.iter().position(|p| p.frames.has_samples().unwrap_or(false)));
-    poll_until(until_ns, ready).unwrap_or(None)
+    poll_until(until_ns, true, ready).unwrap_or(None)
 }
 
 /// Runs the daemon until SIGINT/SIGTERM (or `stop` becomes true).
@@ -111,9 +111,11 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
     let (mut last_summary, mut last_cleanup) = (start_ns, start_ns);
     let mut fired = vec![false; ports.len()];
     // Spin-then-wait (client library): poll the frame queues from shortly
-    // before a frame is due, saving the 15-30 µs event wake-up.
+    // before a frame is due, saving the event wake-up — only when this loop
+    // thread is pinned (`estimator.pin_cpus`); unpinned it gains nothing.
     let spin = Duration::from_micros(config.ipc.receive_spin_us);
-    let strategy = if spin.is_zero() { WaitStrategy::Block } else { WaitStrategy::SpinNearArrival { margin: spin } };
+    let strategy =
+        if spin.is_zero() { WaitStrategy::Block } else { WaitStrategy::SpinIfPinned { margin: spin }.resolve() };
     let mut arrivals = vec![ArrivalPredictor::default(); ports.len()];
     loop {
         let mut ticked = false;

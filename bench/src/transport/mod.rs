@@ -116,7 +116,7 @@ impl TransportReport {
 pub const IOX_MODES: [(&str, &str, WaitStrategy); 3] = [
     (
         "iox-spin",
-        "iceoryx2, spin-then-wait (client default)",
+        "iceoryx2, spin-then-wait",
         WaitStrategy::DEFAULT_SPIN,
     ),
     ("iox-block", "iceoryx2, block on event", WaitStrategy::Block),
