@@ -80,8 +80,8 @@ pub struct EstimatorConfig {
     /// then fewer points; the message then carries DEGRADED).
     pub deadline_aware: bool,
     /// Poses with a lower confidence (0..1) are not published. 0 publishes
-    /// all; with segmenter masks 0.05 drops about half of the ghost objects
-    /// (docs/BENCHMARKS.md, "Built-in segmenter").
+    /// all; the useful threshold depends on the weights (docs/BENCHMARKS.md,
+    /// "Ghost objects").
     pub min_confidence: f32,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).

@@ -106,8 +106,9 @@ fn segment_labels_are_argmax_of_burn_logits() {
     let path = dir.path().join("seg.safetensors");
     let net = save_random(&cfg, &set, &path);
     let mut engine = SegEngine::load(&path, &set).unwrap();
-    // Plain argmax: no fragment removal (tested in the engine's unit tests).
+    // Plain argmax: no fragment or strip removal (tested in the engine's unit tests).
     engine.set_min_component_cells(0);
+    engine.set_max_elongation(0.0);
     engine.set_erode(false);
     // A 640x480 frame with smooth structure so the logits vary across cells.
     let (w, h) = (640usize, 480usize);
