@@ -389,6 +389,21 @@ pub fn wire_pose(q: [f64; 4], t: [f64; 3]) -> nalgebra::Isometry3<f64> {
     nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(t[0], t[1], t[2]), rotation)
 }
 
+/// Smallest ADD-S (m) of `msg`'s poses of class `class_id` against `truth`
+/// (infinite when the message has none of that class).
+pub fn best_add_s(
+    msg: &fusepose_client::PoseMessage,
+    class_id: u16,
+    truth: &nalgebra::Isometry3<f64>,
+    metric: &fusepose_scene::metrics::ObjectMetric,
+) -> f64 {
+    msg.objects()
+        .iter()
+        .filter(|o| o.class_id == class_id)
+        .map(|o| metric.add_s(&wire_pose(o.quaternion, o.translation_m), truth))
+        .fold(f64::INFINITY, f64::min)
+}
+
 /// Waits for the pose message answering frame `sequence`, skipping others.
 pub fn wait_for_sequence(
     consumer: &mut fusepose_client::Consumer,

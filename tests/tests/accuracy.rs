@@ -71,12 +71,7 @@ fn icp_poses_match_rendered_ground_truth() -> anyhow::Result<()> {
             for gt in truth.objects.iter().filter(|o| o.visible_fraction >= MIN_VISIBLE_FRACTION) {
                 let metric = &metrics[gt.class_id as usize - 1];
                 let diameter = objects.objects[gt.class_id as usize - 1].diameter;
-                let best = msg
-                    .objects()
-                    .iter()
-                    .filter(|o| o.class_id == gt.class_id)
-                    .map(|o| metric.add_s(&wire_pose(o.quaternion, o.translation_m), &gt.pose))
-                    .fold(f64::INFINITY, f64::min);
+                let best = best_add_s(&msg, gt.class_id, &gt.pose, metric);
                 scored += 1;
                 errors_mm.push(best * 1e3);
                 if best < CORRECT_FRACTION_OF_DIAMETER * diameter {

@@ -95,12 +95,7 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
         {
             let metric = &metrics[gt.class_id as usize - 1];
             let diameter = objects.objects[gt.class_id as usize - 1].diameter;
-            let best = msg
-                .objects()
-                .iter()
-                .filter(|o| o.class_id == gt.class_id)
-                .map(|o| metric.add_s(&wire_pose(o.quaternion, o.translation_m), &gt.pose))
-                .fold(f64::INFINITY, f64::min);
+            let best = best_add_s(&msg, gt.class_id, &gt.pose, metric);
             expected += 1;
             if best < 0.1 * diameter {
                 found += 1;

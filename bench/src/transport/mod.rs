@@ -155,10 +155,8 @@ fn collect(
         it.find(|w| *w == key)?;
         it.next()?.parse().ok()
     };
-    let polled_percent = field("polled")
-        .zip(line.split_whitespace().skip_while(|w| *w != "of").nth(1).and_then(|v| v.parse::<f64>().ok()))
-        .map(|(p, n)| 100.0 * p / n.max(1.0));
-    let (jitter_us, wake_delay_us) = (field("jitter_us"), field("wake_delay_us"));
+    let (polled_percent, jitter_us, wake_delay_us) =
+        (field("polled_percent"), field("jitter_us"), field("wake_delay_us"));
     let mut histogram = latency::histogram();
     for value in std::fs::read_to_string(file)?
         .lines()

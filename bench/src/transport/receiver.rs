@@ -94,7 +94,8 @@ pub fn main(args: &[String]) -> anyhow::Result<()> {
             }
             let (arrivals, polled) = predictor.hits();
             polling = format!(
-                " polled {polled} of {arrivals} jitter_us {:.1} wake_delay_us {:.1}",
+                " polled_percent {:.2} jitter_us {:.1} wake_delay_us {:.1}",
+                100.0 * polled as f64 / arrivals.max(1) as f64,
                 predictor.jitter_ns() as f64 / 1e3,
                 predictor.wake_delay_ns() as f64 / 1e3
             );
