@@ -134,6 +134,7 @@ fn run_mode(
         threads: 1,
         tracking: tracking_config,
         pin_worker_cpu: None,
+        ..NetOptions::default()
     };
     let mut est = NetEstimator::load(&args.weights, set, options)?;
     let mut ws = Workspace::new(est.workspace_config(objects.max(1) + 2))

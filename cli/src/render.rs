@@ -43,7 +43,7 @@ impl Split {
     }
 }
 
-/// Sensor noise on or off.
+/// A feature on or off (sensor noise, the appearance check).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Toggle {
     On,

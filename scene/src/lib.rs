@@ -21,6 +21,7 @@ pub use camera::Intrinsics;
 pub use model::{Material, Mesh, ObjectModel, ObjectSet, Pose, Symmetry, Texture};
 pub mod mesh_io;
 pub mod surface;
+pub mod appearance;
 pub mod builtin;
 pub mod export;
 pub mod render;
