@@ -134,7 +134,6 @@ fn run_mode(
         threads: 1,
         tracking: tracking_config,
         pin_worker_cpu: None,
-        ..NetOptions::default()
     };
     let mut est = NetEstimator::load(&args.weights, set, options)?;
     let mut ws = Workspace::new(est.workspace_config(objects.max(1) + 2))

@@ -24,9 +24,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{Context, bail};
-use fusepose_estimator::appearance::AppearanceConfig;
 use fusepose_estimator::net::{NetEstimator, NetOptions};
-use crate::render::Toggle;
 use fusepose_estimator::{
     ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
     Workspace, WorkspaceConfig,
@@ -124,20 +122,6 @@ pub struct Args {
     /// `estimator.min_confidence` does.
     #[arg(long, default_value_t = 0.0)]
     pub min_confidence: f32,
-    /// `net`: the experimental appearance check (turns a pose by a
-    /// near-symmetry of the object when the print says so). Off by default:
-    /// it did not help on the held-out split (docs/BENCHMARKS.md).
-    #[arg(long, value_enum, default_value_t = Toggle::Off)]
-    pub appearance: Toggle,
-    /// `net`: how much a turn's colour correlation must beat the estimate's.
-    #[arg(long)]
-    pub turn_min_gain: Option<f32>,
-    /// `net`: a turn must leave at most this fraction of the estimate's colour mismatch.
-    #[arg(long)]
-    pub turn_max_residual_ratio: Option<f32>,
-    /// `net`: refiner iterations after a turn.
-    #[arg(long, default_value_t = 0)]
-    pub refine_after_turn: usize,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -280,20 +264,7 @@ impl Runner {
                 let Some(weights) = &args.weights else {
                     bail!("--estimator net needs --weights FILE (a safetensors file from `fusepose train`)");
                 };
-                let appearance = (args.appearance == Toggle::On).then(|| {
-                    let d = AppearanceConfig::default();
-                    AppearanceConfig {
-                        min_gain: args.turn_min_gain.unwrap_or(d.min_gain),
-                        max_residual_ratio: args.turn_max_residual_ratio.unwrap_or(d.max_residual_ratio),
-                        ..d
-                    }
-                });
-                let options = NetOptions {
-                    refine_iterations: args.refine_iterations,
-                    appearance,
-                    refine_after_turn: args.refine_after_turn,
-                    ..NetOptions::default()
-                };
+                let options = NetOptions { refine_iterations: args.refine_iterations, ..NetOptions::default() };
                 let net = NetEstimator::load(weights, objects, options)
                     .with_context(|| format!("loading {}", weights.display()))?;
                 let config = net.workspace_config(args.max_instances);

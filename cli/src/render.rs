@@ -43,7 +43,7 @@ impl Split {
     }
 }
 
-/// A feature on or off (sensor noise, the appearance check).
+/// Sensor noise on or off.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum Toggle {
     On,

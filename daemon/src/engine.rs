@@ -152,7 +152,6 @@ fn net_options(config: &EstimatorConfig) -> NetOptions {
             refine_iterations: t.refine_iterations,
         }),
         pin_worker_cpu: config.pin_cpus.get(1).copied(),
-        ..NetOptions::default()
     }
 }
 

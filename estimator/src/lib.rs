@@ -9,7 +9,6 @@
 //! frame performs no heap allocation. Depends on `fusepose-scene` for object
 //! models and intrinsics; never on the daemon, client or trainer.
 
-pub mod appearance;
 pub mod cpu_pin;
 pub mod frame;
 pub mod icp;

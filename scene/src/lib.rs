@@ -21,7 +21,6 @@ pub use camera::Intrinsics;
 pub use model::{Material, Mesh, ObjectModel, ObjectSet, Pose, Symmetry, Texture};
 pub mod mesh_io;
 pub mod surface;
-pub mod appearance;
 pub mod builtin;
 pub mod export;
 pub mod render;

@@ -27,7 +27,6 @@ use ndarray::s;
 use super::budget::{self, CostModel, FramePlan, ObjectTimes};
 use super::engine::{Engine, Scratch, quat_matrix, unit_quat};
 use super::weights::{NetLoadError, WeightFile};
-use crate::appearance::{AppearanceCheck, AppearanceConfig};
 use crate::tracking::{FitCheck, Prior, TrackOutcome, TrackingConfig, Tracks};
 use crate::{EstimateError, Estimator, FrameView, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
 
@@ -42,10 +41,6 @@ pub struct NetOptions {
     pub tracking: Option<TrackingConfig>,
     /// Pin the worker thread to this CPU (None: no pinning).
     pub pin_worker_cpu: Option<usize>,
-    /// Appearance check after the refiner (None: off), see [`crate::appearance`].
-    pub appearance: Option<AppearanceConfig>,
-    /// Refiner iterations after the appearance check turned a pose.
-    pub refine_after_turn: usize,
 }
 
 impl Default for NetOptions {
@@ -56,8 +51,6 @@ impl Default for NetOptions {
             threads: cores.clamp(1, 2),
             tracking: None,
             pin_worker_cpu: None,
-            appearance: None,
-            refine_after_turn: 0,
         }
     }
 }
@@ -65,9 +58,6 @@ impl Default for NetOptions {
 /// What one thread needs besides the engine, scratch and workspace.
 #[derive(Clone, Copy)]
 struct FrameJob<'a> {
-    frame: &'a FrameView<'a>,
-    appearance: Option<&'a AppearanceCheck>,
-    refine_after_turn: usize,
     plan: FramePlan,
     deadline: Option<Instant>,
     /// Estimated cost of one refiner iteration at the plan's points, ns.
@@ -84,8 +74,6 @@ struct InstanceResult {
     prior: Prior,
     outcome: TrackOutcome,
     times: ObjectTimes,
-    /// The appearance check replaced the network's pose by a turn of it.
-    turned: bool,
 }
 
 fn since(t: &mut Instant) -> Duration {
@@ -155,7 +143,7 @@ fn estimate_instance(
             let prior = Prior { rotation: rot, translation: t, confidence: prior.confidence };
             // No pose net ran: keep its cost model out of this object's times.
             times.pose = Duration::ZERO;
-            return InstanceResult { pose, prior, outcome: TrackOutcome { tracked: true, fit_m }, times, turned: false };
+            return InstanceResult { pose, prior, outcome: TrackOutcome { tracked: true, fit_m }, times };
         }
     }
     let best = engine.pose(sc, k);
@@ -173,21 +161,9 @@ fn estimate_instance(
         done = refine_loop(engine, sc, k, &mut rot, &mut t, job.plan.refine_iterations, job);
         times.refine = since(&mut clock);
     }
-    let mut turned = false;
-    if let Some(check) = job.appearance {
-        let choice = check.choose(k, job.frame, &rot, &t);
-        if choice.turn.is_some() {
-            turned = true;
-            (rot, t) = (choice.rotation, choice.translation);
-            if job.refine_after_turn > 0 && done > 0 {
-                done += refine_loop(engine, sc, k, &mut rot, &mut t, job.refine_after_turn, job);
-            }
-        }
-        times.refine += since(&mut clock);
-    }
     times.refine_iterations = done;
     let mut pose = finish_pose(inst, i, &rot, &t, confidence, done);
-    if done == 0 && !turned {
+    if done == 0 {
         // The pose net's own quaternion (no matrix round trip).
         pose.rotation = unit_quat(q);
     }
@@ -197,7 +173,6 @@ fn estimate_instance(
         prior: Prior { rotation: rot, translation: t, confidence },
         outcome: TrackOutcome { tracked: false, fit_m },
         times,
-        turned,
     }
 }
 
@@ -221,8 +196,6 @@ fn finish_pose(inst: crate::Instance, i: usize, rot: &Matrix3<f32>, t: &Vector3<
 /// A frame's share of work for the worker: instances `1, 3, 5, …` of `*ws`.
 struct Task {
     ws: *const Workspace,
-    /// The frame (lifetime erased; alive until the task is done, see below).
-    frame: *const FrameView<'static>,
     /// Tracking priors per instance (same length as the instances).
     priors: *const [Option<Prior>],
     plan: FramePlan,
@@ -234,9 +207,8 @@ struct Task {
 }
 
 // SAFETY: the caller blocks until the worker reports the task done (also when
-// unwinding, see `WaitGuard`), so `*ws`, `*frame` and `*priors` outlive every
-// access; all are plain data read concurrently by both threads and written by
-// neither.
+// unwinding, see `WaitGuard`), so `*ws` and `*priors` outlive every access;
+// both are plain data read concurrently by both threads and written by neither.
 unsafe impl Send for Task {}
 
 enum Msg {
@@ -296,17 +268,7 @@ struct Worker {
 }
 
 impl Worker {
-    #[allow(clippy::too_many_arguments)]
-    fn spawn(
-        engine: Arc<Engine>,
-        fit: Option<Arc<FitCheck>>,
-        appearance: Option<Arc<AppearanceCheck>>,
-        refine_after_turn: usize,
-        pin: Option<usize>,
-        n: usize,
-        s: usize,
-        cap: usize,
-    ) -> Option<Self> {
+    fn spawn(engine: Arc<Engine>, fit: Option<Arc<FitCheck>>, pin: Option<usize>, n: usize, s: usize, cap: usize) -> Option<Self> {
         let shared = Arc::new(Shared {
             msg: Slot::new(),
             done: Slot::new(),
@@ -327,11 +289,8 @@ impl Worker {
                         Msg::Run(task) => {
                             let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                                 // SAFETY: see `Task`.
-                                let (ws, frame, priors) = unsafe { (&*task.ws, &*task.frame, &*task.priors) };
+                                let (ws, priors) = unsafe { (&*task.ws, &*task.priors) };
                                 let job = FrameJob {
-                                    frame,
-                                    appearance: appearance.as_deref(),
-                                    refine_after_turn,
                                     plan: task.plan,
                                     deadline: task.deadline,
                                     iter_ns: task.iter_ns,
@@ -410,8 +369,6 @@ pub struct NetCounters {
     pub degraded_frames: u64,
     /// Objects run on fewer than N points.
     pub reduced_point_objects: u64,
-    /// Objects whose pose the appearance check turned.
-    pub turned: u64,
 }
 
 /// The fusion-network estimator.
@@ -431,8 +388,6 @@ pub struct NetEstimator {
     last_degraded: bool,
     tracks: Option<Tracks>,
     fit: Option<Arc<FitCheck>>,
-    appearance: Option<Arc<AppearanceCheck>>,
-    refine_after_turn: usize,
     priors: Vec<Option<Prior>>,
     counters: NetCounters,
 }
@@ -463,10 +418,8 @@ impl NetEstimator {
         let refine_iterations = options.refine_iterations.unwrap_or(c.refine_iters);
         let fit = options.tracking.map(|_| Arc::new(FitCheck::new(objects)));
         let tracks = options.tracking.map(|t| Tracks::new(t, c.num_classes));
-        let appearance = options.appearance.map(|a| Arc::new(AppearanceCheck::new(objects, a)));
-        let refine_after_turn = options.refine_after_turn;
         let worker = if options.threads >= 2 {
-            Worker::spawn(engine.clone(), fit.clone(), appearance.clone(), refine_after_turn, options.pin_worker_cpu, n, s, cap)
+            Worker::spawn(engine.clone(), fit.clone(), options.pin_worker_cpu, n, s, cap)
         } else {
             None
         };
@@ -485,8 +438,6 @@ impl NetEstimator {
             last_degraded: false,
             tracks,
             fit,
-            appearance,
-            refine_after_turn,
             priors: Vec::with_capacity(cap),
             counters: NetCounters::default(),
         })
@@ -596,7 +547,6 @@ impl NetEstimator {
         self.counters.objects += 1;
         self.counters.tracked += result.outcome.tracked as u64;
         self.counters.reduced_point_objects += (result.times.points < result.times.full_points) as u64;
-        self.counters.turned += result.turned as u64;
         if let Some(tracks) = self.tracks.as_mut() {
             tracks.update(result.pose.class_id, result.prior, result.outcome);
         }
@@ -623,7 +573,7 @@ impl Estimator for NetEstimator {
 
     fn estimate(
         &mut self,
-        frame: &FrameView<'_>,
+        _frame: &FrameView<'_>,
         ws: &mut Workspace,
         out: &mut PoseSet,
     ) -> Result<(), EstimateError> {
@@ -656,11 +606,7 @@ impl Estimator for NetEstimator {
         let (max_fit_m, tracking_iterations) = tracking.map_or((f64::NAN, 0), |t| (t.max_fit_m, t.refine_iterations.max(1)));
         let iter_ns = self.costs.refine_iter_ns(plan.points, full_points);
         let fit = self.fit.clone();
-        let appearance = self.appearance.clone();
         let job = FrameJob {
-            frame,
-            appearance: appearance.as_deref(),
-            refine_after_turn: self.refine_after_turn,
             plan,
             deadline,
             iter_ns,
@@ -675,7 +621,6 @@ impl Estimator for NetEstimator {
         {
             w.shared.msg.put(Msg::Run(Task {
                 ws,
-                frame: (frame as *const FrameView<'_>).cast::<FrameView<'static>>(),
                 priors: self.priors.as_slice(),
                 plan,
                 deadline,
