@@ -122,6 +122,9 @@ pub struct Args {
     /// `estimator.min_confidence` does.
     #[arg(long, default_value_t = 0.0)]
     pub min_confidence: f32,
+    /// `net`: points per object (default: the weight file's N).
+    #[arg(long)]
+    pub points: Option<usize>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -267,7 +270,8 @@ impl Runner {
                 let options = NetOptions { refine_iterations: args.refine_iterations, ..NetOptions::default() };
                 let net = NetEstimator::load(weights, objects, options)
                     .with_context(|| format!("loading {}", weights.display()))?;
-                let config = net.workspace_config(args.max_instances);
+                let mut config = net.workspace_config(args.max_instances);
+                config.num_points = args.points.unwrap_or(config.num_points);
                 (Box::new(net), config)
             }
         };
