@@ -125,6 +125,11 @@ pub struct Args {
     /// `net`: points per object (default: the weight file's N).
     #[arg(long)]
     pub points: Option<usize>,
+    /// Join regions of one class into one instance when their points fit
+    /// inside one object: within FACTOR × its diameter (0 = keep every region),
+    /// as the daemon's `estimator.join_parts`.
+    #[arg(long, default_value_t = 1.0)]
+    pub join_parts: f32,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -249,6 +254,8 @@ struct Runner {
     /// Estimates matched to no ground-truth object (ghost objects: a false
     /// instance of the masks, or a second instance of an object).
     unmatched: usize,
+    /// Regions joined into another of their class (`--join-parts`).
+    joined: usize,
     min_confidence: f32,
     csv: Option<BopResultsWriter>,
 }
@@ -275,7 +282,11 @@ impl Runner {
                 (Box::new(net), config)
             }
         };
-        let workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
+        let mut workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
+        if args.join_parts > 0.0 {
+            let extents: Vec<f32> = objects.objects.iter().map(|o| (o.diameter * args.join_parts as f64) as f32).collect();
+            workspace.join_parts(&extents);
+        }
         let csv = match &args.csv {
             None => None,
             Some(path) => {
@@ -296,6 +307,7 @@ impl Runner {
             object_ms: Vec::new(),
             refused: BTreeMap::new(),
             unmatched: 0,
+            joined: 0,
             min_confidence: args.min_confidence,
             csv,
         })
@@ -312,6 +324,7 @@ impl Runner {
         };
         let start = Instant::now();
         let prepared = self.workspace.prepare(&view, seed);
+        self.joined += self.workspace.stats().joined_parts as usize;
         let estimated = match prepared {
             Ok(_) => self.estimator.estimate(&view, &mut self.workspace, &mut self.poses).map(|_| ()),
             Err(e) => Err(e.into()),
@@ -364,6 +377,9 @@ impl Runner {
             self.unmatched,
             self.unmatched as f64 / self.frame_ms.len().max(1) as f64
         );
+        if self.joined > 0 {
+            println!("regions joined as pieces of one object: {}", self.joined);
+        }
         if !self.refused.is_empty() {
             println!("frames refused: {:?}", self.refused);
         }
@@ -388,6 +404,7 @@ impl Runner {
             o.insert("frames".into(), self.frame_ms.len().into());
             o.insert("frames_refused".into(), self.refused.values().sum::<usize>().into());
             o.insert("unmatched_estimates".into(), self.unmatched.into());
+            o.insert("joined_parts".into(), self.joined.into());
         }
         let per_object: serde_json::Map<String, serde_json::Value> =
             self.table.rows().iter().map(|r| (r.name.clone(), row(r))).collect();

@@ -83,6 +83,10 @@ pub struct EstimatorConfig {
     /// all; the useful threshold depends on the weights (docs/BENCHMARKS.md,
     /// "Ghost objects").
     pub min_confidence: f32,
+    /// Regions of one class whose points fit inside one object (within this
+    /// factor × its diameter) are joined into one instance: an occluder that
+    /// splits an object no longer makes two poses. 0 keeps every region.
+    pub join_parts: f32,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
     pub pin_cpus: Vec<usize>,
@@ -168,6 +172,7 @@ impl Default for EstimatorConfig {
             masks: MaskSource::Auto,
             deadline_aware: true,
             min_confidence: 0.0,
+            join_parts: 1.0,
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }
@@ -250,6 +255,9 @@ impl DaemonConfig {
         }
         if e.refine_iterations > 1000 {
             return Err(invalid("estimator.refine_iterations", e.refine_iterations, "must be at most 1000"));
+        }
+        if !(e.join_parts.is_finite() && (0.0..=4.0).contains(&e.join_parts)) {
+            return Err(invalid("estimator.join_parts", e.join_parts, "must be in 0..=4 (0 = off)"));
         }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
@@ -348,6 +356,9 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\nmin_confidence = 1.5\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.min_confidence"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\nmin_confidence = 0.05\n").unwrap().estimator.min_confidence, 0.05);
+        let err = DaemonConfig::parse("[estimator]\njoin_parts = -1.0\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.join_parts"), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\njoin_parts = 0\n").unwrap().estimator.join_parts, 0.0);
         let err = DaemonConfig::parse("[estimator.tracking]\nfull_estimate_every = 0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.tracking.full_estimate_every"), "{err}");
         let err = DaemonConfig::parse("[estimator]\npin_cpus = [0, 1, 2]\n").unwrap_err().to_string();

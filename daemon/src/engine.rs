@@ -33,6 +33,10 @@ pub struct EngineSpec {
     pub masks: MaskSource,
     /// Poses less confident than this are not published (`estimator.min_confidence`).
     pub min_confidence: f32,
+    /// Per class (id − 1): regions of the class whose points lie within this
+    /// many metres of each other are one instance (`estimator.join_parts`);
+    /// empty = never join.
+    pub part_extents: Vec<f32>,
 }
 
 /// The object set named by `estimator.objects`.
@@ -90,6 +94,9 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     spec.min_confidence = config.min_confidence;
     if spec.factory.is_some() {
         let objects = load_objects(config)?;
+        if config.join_parts > 0.0 {
+            spec.part_extents = objects.objects.iter().map(|o| (o.diameter * config.join_parts as f64) as f32).collect();
+        }
         spec.segmenter = segmenter(config, &objects)?;
         spec.masks = config.masks;
         if let Some(seg) = &spec.segmenter {
@@ -114,6 +121,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             segmenter: None,
             masks: MaskSource::Labels,
             min_confidence: 0.0,
+            part_extents: Vec::new(),
         })
     };
     match config.kind {
@@ -125,6 +133,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             segmenter: None,
             masks: MaskSource::Labels,
             min_confidence: 0.0,
+            part_extents: Vec::new(),
         }),
         EstimatorKind::Icp => icp(),
         EstimatorKind::Net => {
@@ -187,6 +196,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         segmenter: None,
         masks: MaskSource::Labels,
         min_confidence: 0.0,
+        part_extents: Vec::new(),
     })
 }
 
@@ -229,7 +239,11 @@ impl PoseEngine {
     pub fn new(spec: &EngineSpec) -> anyhow::Result<Self> {
         let estimator = spec.factory.as_ref().map(|f| f()).transpose()?;
         let workspace = match estimator {
-            Some(_) => Some(Workspace::new(spec.workspace).map_err(|e| anyhow::anyhow!("estimator: {e}"))?),
+            Some(_) => {
+                let mut ws = Workspace::new(spec.workspace).map_err(|e| anyhow::anyhow!("estimator: {e}"))?;
+                ws.join_parts(&spec.part_extents);
+                Some(ws)
+            }
             None => None,
         };
         let segmenter = match (&estimator, &spec.segmenter) {

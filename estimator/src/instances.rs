@@ -138,6 +138,45 @@ impl InstanceFinder {
         (self.width, self.height)
     }
 
+    /// Joins component `from` into component `into` (both by component id):
+    /// `from`'s pixels take `into`'s id, pixel counts add up, the boxes are
+    /// united and `from` leaves the kept list. Kept components are re-sorted
+    /// largest first (ties by component id, i.e. raster order). Returns false,
+    /// changing nothing, when either id is not kept or they are equal or of
+    /// different classes.
+    pub fn join(&mut self, into: u32, from: u32) -> bool {
+        let (Some(i), Some(f)) = (
+            self.kept.iter().position(|c| c.component_id == into),
+            self.kept.iter().position(|c| c.component_id == from),
+        ) else {
+            return false;
+        };
+        if i == f || self.kept[i].class_id != self.kept[f].class_id {
+            return false;
+        }
+        let gone = self.kept[f];
+        let [u0, v0, u1, v1] = gone.bbox.map(|x| x as usize);
+        for v in v0..=v1.min(self.height.saturating_sub(1)) {
+            for id in &mut self.ids[v * self.width + u0..=v * self.width + u1.min(self.width - 1)] {
+                if *id == from {
+                    *id = into;
+                }
+            }
+        }
+        let keep = &mut self.kept[i];
+        keep.pixels += gone.pixels;
+        keep.bbox = [
+            keep.bbox[0].min(gone.bbox[0]),
+            keep.bbox[1].min(gone.bbox[1]),
+            keep.bbox[2].max(gone.bbox[2]),
+            keep.bbox[3].max(gone.bbox[3]),
+        ];
+        self.kept.remove(f);
+        // Unstable sort does not allocate; the key makes the order total.
+        self.kept.sort_unstable_by_key(|c| (std::cmp::Reverse(c.pixels), c.component_id));
+        true
+    }
+
     fn flood_fill(&mut self, labels: &LabelPlane<'_>, start: usize, class_id: u16, id: u32) -> Component {
         let (w, h) = (self.width, self.height);
         let (mut u_min, mut v_min, mut u_max, mut v_max) = (usize::MAX, usize::MAX, 0, 0);
@@ -234,6 +273,29 @@ mod tests {
         let ids = f.component_ids();
         let marked = ids.iter().filter(|&&i| i == found[0].component_id).count();
         assert_eq!(marked, 56);
+    }
+
+    #[test]
+    fn join_moves_pixels_unites_boxes_and_resorts() {
+        let (w, h) = (20, 10);
+        let mut l = vec![0u8; w * h];
+        paint(&mut l, w, [0, 0, 3, 3], 1); // 16 px
+        paint(&mut l, w, [10, 5, 12, 6], 1); // 6 px
+        paint(&mut l, w, [15, 0, 17, 2], 2); // 9 px
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::U8(&l), w, h, limits(1, 8, 0)).to_vec();
+        let (big, other, small) = (found[0].component_id, found[1].component_id, found[2].component_id);
+        assert_eq!((found[0].pixels, found[1].pixels, found[2].pixels), (16, 9, 6));
+        assert!(!f.join(big, other), "different classes are not joined");
+        assert!(!f.join(big, big));
+        assert!(f.join(big, small));
+        let kept = f.components().to_vec();
+        assert_eq!(kept.len(), 2);
+        assert_eq!((kept[0].component_id, kept[0].pixels, kept[0].bbox), (big, 22, [0, 0, 12, 6]));
+        assert_eq!(kept[1].component_id, other);
+        assert_eq!(f.component_ids().iter().filter(|&&i| i == big).count(), 22);
+        assert_eq!(f.component_ids()[6 * w + 12], big);
+        assert!(!f.join(big, small), "a joined component is gone");
     }
 
     #[test]

@@ -13,6 +13,7 @@ pub mod cpu_pin;
 pub mod frame;
 pub mod icp;
 pub mod instances;
+pub mod parts;
 pub mod net;
 pub mod poses;
 pub mod sampling;

@@ -16,6 +16,7 @@ use rand_pcg::Pcg64Mcg;
 
 use crate::frame::{FrameError, FrameView, LabelPlane};
 use crate::instances::{Component, InstanceFinder, InstanceLimits, LabelStats};
+use crate::parts::PartJoiner;
 use crate::sampling;
 
 /// Sizes fixed at start-up; buffers are allocated once from them.
@@ -97,6 +98,9 @@ pub struct PrepareStats {
     pub labels: LabelStats,
     /// Instances dropped for having fewer than `min_valid_depth` valid-depth pixels.
     pub low_depth_instances: u32,
+    /// Regions joined into another region of their class as pieces of one
+    /// object (see [`Workspace::join_parts`]).
+    pub joined_parts: u32,
 }
 
 /// All per-frame buffers. Instance `i` owns row `i` of each array; rows at and
@@ -116,6 +120,8 @@ pub struct Workspace {
     candidates: Vec<u32>,
     /// Sampled pixel indices of the instance being prepared.
     picked: Vec<u32>,
+    /// Joins same-class pieces of one object; `None` keeps every region.
+    joiner: Option<PartJoiner>,
     stats: PrepareStats,
 }
 
@@ -144,6 +150,7 @@ impl Workspace {
             finder: InstanceFinder::with_capacity(0, m),
             candidates: Vec::new(),
             picked: vec![0; n],
+            joiner: None,
             stats: PrepareStats::default(),
         })
     }
@@ -168,6 +175,9 @@ impl Workspace {
         };
         self.finder.find(&labels, w, h, limits);
         self.stats.labels = self.finder.stats();
+        if let Some(joiner) = &mut self.joiner {
+            self.stats.joined_parts = joiner.join(&mut self.finder, frame);
+        }
         if self.candidates.capacity() < w * h {
             self.candidates.reserve(w * h - self.candidates.len());
         }
@@ -178,6 +188,15 @@ impl Workspace {
         }
         self.zero_unused_rows();
         Ok(self.instances.len())
+    }
+
+    /// From the next frame on, joins regions of one class into one instance
+    /// when their points fit inside one object (see [`crate::parts`]):
+    /// `extents[k]` is the largest distance in metres between two points of
+    /// class id k + 1 (its diameter). An empty slice turns joining off.
+    /// Allocates; call it at start-up, not per frame.
+    pub fn join_parts(&mut self, extents: &[f32]) {
+        self.joiner = (!extents.is_empty()).then(|| PartJoiner::new(extents, self.config.max_instances));
     }
 
     /// What the last [`prepare`](Self::prepare) skipped.

@@ -73,6 +73,8 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
     let objects = object_set(&[l.clone(), s.clone()]);
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
     let mut ws = Workspace::new(WorkspaceConfig { num_classes: 2, ..Default::default() }).unwrap();
+    let extents: Vec<f32> = objects.objects.iter().map(|o| o.diameter as f32).collect();
+    ws.join_parts(&extents);
     let mut out = PoseSet::with_capacity(8);
 
     let warm = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [-0.05, 0.0, 0.5]))]);
@@ -86,6 +88,7 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
             (2, &s, pose([1.0, 1.0, 0.0], 140.0, [0.06, -0.01, 0.5])),
         ]),
         render(&[(2, &s, pose([0.0, 0.0, 1.0], 45.0, [0.0, 0.0, 0.4]))]),
+        split(render(&[(1, &l, pose([0.0, 1.0, 0.0], 20.0, [0.0, 0.0, 0.5]))])),
     ];
     for (i, frame) in frames.iter().enumerate() {
         let view = frame.view();
@@ -97,5 +100,22 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
         assert!(prepared >= 1);
         assert_eq!(out.len(), prepared, "every instance got a pose");
         assert_eq!(n, 0, "frame {i}: {n} allocations in prepare + estimate");
+        if i == 2 {
+            assert_eq!((prepared, ws.stats().joined_parts), (1, 1), "the split object is one instance");
+        }
     }
+}
+
+/// Clears the labels of a 3-pixel-wide column through the middle of the
+/// labelled pixels, so the object shows up as two regions.
+fn split(mut frame: common::SyntheticFrame) -> common::SyntheticFrame {
+    let w = frame.intrinsics.width as usize;
+    let columns: Vec<usize> = (0..frame.labels.len()).filter(|&p| frame.labels[p] != 0).map(|p| p % w).collect();
+    let mid = (columns.iter().min().unwrap() + columns.iter().max().unwrap()) / 2;
+    for p in 0..frame.labels.len() {
+        if (mid - 1..=mid + 1).contains(&(p % w)) {
+            frame.labels[p] = 0;
+        }
+    }
+    frame
 }

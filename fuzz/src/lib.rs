@@ -197,6 +197,8 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
     // prepare; here prepare runs either way, for coverage, and the two must agree.
     let content = view.check_content(config.num_classes);
     let mut ws = Workspace::new(config).expect("fixed config is valid");
+    // Joining same-class pieces runs too (as in the daemon): 25 cm objects.
+    ws.join_parts(&[0.25; 5]);
     let result = ws.prepare(&view, header.sequence);
     check_workspace(&ws, &view, &result);
     match &content {
