@@ -97,6 +97,9 @@ pub struct Args {
     /// segmenter embedded in the --resume file instead of the ground truth.
     #[arg(long, default_value_t = 0.0)]
     pub seg_masks: f64,
+    /// Train only on objects at least this visible (share of the silhouette, 0..1).
+    #[arg(long, default_value_t = 0.1)]
+    pub min_visible: f64,
     /// `--stage seg`: network input size `WxH` of a fresh run (default 160x120).
     #[arg(long)]
     pub seg_size: Option<String>,
@@ -137,6 +140,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     config
         .validate()
         .map_err(|e| anyhow::anyhow!("network config: {e}"))?;
+    if !(0.0..=1.0).contains(&args.min_visible) {
+        anyhow::bail!("--min-visible must be in 0..=1, got {}", args.min_visible);
+    }
     let opts = TrainOptions {
         out: args.out,
         minutes: args.minutes,
@@ -164,10 +170,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 "{} objects, tabletop scenes rendered on the fly with sensor noise",
                 args.objects
             ),
-        },
+        } + &format!(", objects >= {:.0} % visible", args.min_visible * 100.0),
         source,
         progress: !args.quiet,
         seg_masks: args.seg_masks,
+        min_visible: args.min_visible,
     };
     let summary = train(Arc::new(set), &opts)?;
     println!(

@@ -78,6 +78,9 @@ pub struct TrainOptions {
     /// Share of rendered training frames whose masks come from the segmenter
     /// embedded in the `resume` file (0 = ground-truth masks only).
     pub seg_masks: f64,
+    /// Objects less visible than this (share of their silhouette, 0..1) are
+    /// not trained on.
+    pub min_visible: f64,
 }
 
 /// What a finished run reports.
@@ -189,12 +192,13 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     record.data = opts.data_desc.clone();
     let start_steps = record.steps;
     log.line(&format!(
-        "# start {} | stage {:?} batch {} lr {} seed {} | resume {:?} at step {} | params {}",
+        "# start {} | stage {:?} batch {} lr {} seed {} min_visible {} | resume {:?} at step {} | params {}",
         chrono_like_now(),
         opts.stage,
         opts.batch,
         opts.lr,
         opts.seed,
+        opts.min_visible,
         opts.resume,
         start_steps,
         cfg.parameter_count()
@@ -204,7 +208,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         num_points: cfg.num_points,
         crop_size: cfg.crop_size,
         min_points: 32,
-        min_visible: 0.1,
+        min_visible: opts.min_visible,
         augment: true,
     };
     // Training scenes: a per-seed, per-resume range far from the validation seeds.

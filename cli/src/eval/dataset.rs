@@ -18,6 +18,9 @@ pub struct GtObject {
     pub class_id: u16,
     /// Object → camera, metres.
     pub pose: Pose,
+    /// Visible share of the object's silhouette, 0..=1 (BOP `visib_fract`;
+    /// `None` where the dataset does not say).
+    pub visible: Option<f64>,
 }
 
 /// One frame with ground truth, class ids mapped onto the object set.
@@ -122,7 +125,7 @@ impl EvalDataset {
                         .gt
                         .iter()
                         .filter(|g| known(g.obj_id) != 0)
-                        .map(|g| GtObject { class_id: g.obj_id, pose: g.pose })
+                        .map(|g| GtObject { class_id: g.obj_id, pose: g.pose, visible: Some(g.visib_fract) })
                         .collect(),
                 })
             }
@@ -142,7 +145,7 @@ impl EvalDataset {
                         .gt
                         .iter()
                         .filter(|g| map(g.class_id) != 0)
-                        .map(|g| GtObject { class_id: map(g.class_id), pose: g.pose })
+                        .map(|g| GtObject { class_id: map(g.class_id), pose: g.pose, visible: None })
                         .collect(),
                 })
             }
