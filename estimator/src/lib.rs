@@ -1,7 +1,7 @@
 //! # fusepose-estimator — pure compute from one RGB-D frame to object poses
 //!
-//! Frame validation, instances from a label plane, per-instance point
-//! sampling and colour crops in a preallocated [`Workspace`], the ICP
+//! Frame validation, instances from a label plane (pieces of one object
+//! split by an occluder joined again), per-instance point sampling and colour crops in a preallocated [`Workspace`], the ICP
 //! baseline, and the fusion-network and segmenter inference engines.
 //!
 //! This crate touches memory only: no IPC, no files except reading weight
