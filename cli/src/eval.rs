@@ -243,6 +243,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
 const VISIBILITY_BUCKETS: [(f64, &str); 4] =
     [(0.1, "visible < 10 %"), (0.3, "10-30 %"), (0.6, "30-60 %"), (f64::INFINITY, ">= 60 %")];
 
+/// Index in [`VISIBILITY_BUCKETS`] of a visible fraction (NaN counts as fully visible).
+fn visibility_bucket(visible: f64) -> usize {
+    VISIBILITY_BUCKETS.iter().position(|(below, _)| visible < *below).unwrap_or(VISIBILITY_BUCKETS.len() - 1)
+}
+
 /// One estimator under evaluation with its buffers and accumulated results.
 struct Runner {
     kind: EstimatorKind,
@@ -362,8 +367,7 @@ impl Runner {
             let errors = est.zip(metrics.get(gt.class_id as usize - 1)).map(|(e, m)| m.errors(&pose_of(e), &gt.pose));
             self.table.record(gt.class_id, errors);
             if let Some(v) = gt.visible {
-                let bucket = VISIBILITY_BUCKETS.iter().position(|(below, _)| v < *below).unwrap_or(0);
-                self.by_visibility.record(bucket as u16 + 1, errors);
+                self.by_visibility.record(visibility_bucket(v) as u16 + 1, errors);
             }
         }
         if let Some(csv) = &mut self.csv {
@@ -526,6 +530,12 @@ mod tests {
             bbox: [0; 4],
             iterations: 1,
         }
+    }
+
+    #[test]
+    fn visibility_buckets_split_at_10_30_60_percent() {
+        let b: Vec<usize> = [0.0, 0.099, 0.1, 0.29, 0.3, 0.59, 0.6, 1.0, f64::NAN].map(visibility_bucket).to_vec();
+        assert_eq!(b, [0, 0, 1, 1, 2, 2, 3, 3, 3]);
     }
 
     #[test]
