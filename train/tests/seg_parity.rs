@@ -245,6 +245,10 @@ fn segmenter_embeds_into_the_pose_network_file() {
     let mut a = SegEngine::load(&seg, &set).unwrap();
     let mut b = SegEngine::load(&combined, &set).unwrap();
     assert_eq!(a.forward(&input).unwrap(), b.forward(&input).unwrap());
+    // The trainer resumes from the embedded segmenter: same logits as the segmenter-only file.
+    let resumed = store::load(&combined, &Device::flex()).unwrap();
+    assert_eq!(resumed.file.config, cfg);
+    assert_close(a.forward(&input).unwrap(), &burn_logits(&resumed.net, &cfg, &input));
 
     // A pose network for other objects (same count, other order) refuses the segmenter.
     let mut swapped = three_objects();

@@ -2,7 +2,8 @@
 //! burn's safetensors export of [`SegNet`] (F32, conv `[O, I, k, k]`) plus
 //! metadata — format tag `fusepose-seg-v1`, [`SegConfig`] JSON, the object
 //! list with mesh/sample hashes, the training record (steps, metrics) and the
-//! trainer's hyper-parameters. So `resume` accepts either.
+//! trainer's hyper-parameters. So `resume` accepts either, and also a
+//! pose-network file with the segmenter embedded (tensors `seg.*`).
 
 use std::path::Path;
 
@@ -52,6 +53,10 @@ pub fn load(path: &Path, device: &Device) -> anyhow::Result<LoadedSeg> {
     let file = SegFile::read(path).with_context(|| format!("reading {}", path.display()))?;
     let mut net = SegNet::new(&file.config, device);
     let mut store = SafetensorsStore::from_file(path);
+    if fusepose_estimator::seg::file::has_embedded(&file.metadata) {
+        // A pose-network file with the segmenter embedded: tensors `seg.*`.
+        store = store.with_key_remapping(r"^seg\.", "");
+    }
     let result = net.load_from(&mut store).map_err(|e| anyhow::anyhow!("loading {}: {e:?}", path.display()))?;
     if !result.missing.is_empty() || !result.errors.is_empty() {
         bail!("{}: missing tensors {:?}, errors {:?}", path.display(), result.missing, result.errors);
