@@ -296,10 +296,7 @@ impl Runner {
             }
         };
         let mut workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
-        if args.join_parts > 0.0 {
-            let extents: Vec<f32> = objects.objects.iter().map(|o| (o.diameter * args.join_parts as f64) as f32).collect();
-            workspace.join_parts(&extents);
-        }
+        workspace.join_parts(&fusepose_estimator::parts::extents(objects, args.join_parts));
         let csv = match &args.csv {
             None => None,
             Some(path) => {

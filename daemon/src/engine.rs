@@ -94,9 +94,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     spec.min_confidence = config.min_confidence;
     if spec.factory.is_some() {
         let objects = load_objects(config)?;
-        if config.join_parts > 0.0 {
-            spec.part_extents = objects.objects.iter().map(|o| (o.diameter * config.join_parts as f64) as f32).collect();
-        }
+        spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.segmenter = segmenter(config, &objects)?;
         spec.masks = config.masks;
         if let Some(seg) = &spec.segmenter {

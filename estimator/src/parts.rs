@@ -14,9 +14,21 @@
 //! stride over its valid-depth pixels. Buffers are sized in
 //! [`PartJoiner::new`] for `max_instances` regions; joining never allocates.
 
+use fusepose_scene::ObjectSet;
+
 use crate::frame::FrameView;
 use crate::instances::InstanceFinder;
 use crate::sampling::back_project;
+
+/// Per-class extents for [`PartJoiner::new`] / `Workspace::join_parts`:
+/// each object's diameter × `factor`, metres; empty (never join) when
+/// `factor` is not positive.
+pub fn extents(objects: &ObjectSet, factor: f32) -> Vec<f32> {
+    if factor.is_nan() || factor <= 0.0 {
+        return Vec::new();
+    }
+    objects.objects.iter().map(|o| (o.diameter * factor as f64) as f32).collect()
+}
 
 /// Points per region used by the fit test.
 pub const SAMPLES: usize = 64;
@@ -57,8 +69,7 @@ impl PartJoiner {
         let kept = finder.components();
         let n = kept.len().min(self.counts.len());
         self.ids.clear();
-        for k in 0..n {
-            let c = kept[k];
+        for (k, c) in kept[..n].iter().enumerate() {
             self.ids.push((c.component_id, c.class_id));
             self.root[k] = k;
             self.counts[k] = 0;
@@ -126,26 +137,19 @@ impl PartJoiner {
         let ids = finder.component_ids();
         let w = frame.width();
         let [u0, v0, u1, v1] = c.bbox.map(|x| x as usize);
-        let valid = |p: usize| ids[p] == c.component_id && frame.depth.metres(p).is_some();
-        let mut total = 0usize;
-        for v in v0..=v1 {
-            total += (u0..=u1).filter(|&u| valid(v * w + u)).count();
-        }
-        let stride = total.div_ceil(SAMPLES).max(1);
-        let out = &mut self.samples[k * SAMPLES..(k + 1) * SAMPLES];
-        let (mut seen, mut taken) = (0usize, 0usize);
-        for v in v0..=v1 {
-            for u in u0..=u1 {
+        // Valid-depth pixels of the region in raster order: (u, v, depth in metres).
+        let region = || {
+            (v0..=v1).flat_map(move |v| (u0..=u1).map(move |u| (u, v))).filter_map(|(u, v)| {
                 let p = v * w + u;
-                let Some(z) = frame.depth.metres(p).filter(|_| ids[p] == c.component_id) else {
-                    continue;
-                };
-                if seen % stride == 0 && taken < SAMPLES {
-                    out[taken] = back_project(frame, u, v, z);
-                    taken += 1;
-                }
-                seen += 1;
-            }
+                frame.depth.metres(p).filter(|_| ids[p] == c.component_id).map(|z| (u, v, z))
+            })
+        };
+        let stride = region().count().div_ceil(SAMPLES).max(1);
+        let out = &mut self.samples[k * SAMPLES..(k + 1) * SAMPLES];
+        let mut taken = 0;
+        for ((u, v, z), slot) in region().step_by(stride).zip(out.iter_mut()) {
+            *slot = back_project(frame, u, v, z);
+            taken += 1;
         }
         self.counts[k] = taken;
     }

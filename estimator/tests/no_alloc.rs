@@ -73,8 +73,7 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
     let objects = object_set(&[l.clone(), s.clone()]);
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
     let mut ws = Workspace::new(WorkspaceConfig { num_classes: 2, ..Default::default() }).unwrap();
-    let extents: Vec<f32> = objects.objects.iter().map(|o| o.diameter as f32).collect();
-    ws.join_parts(&extents);
+    ws.join_parts(&fusepose_estimator::parts::extents(&objects, 1.0));
     let mut out = PoseSet::with_capacity(8);
 
     let warm = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [-0.05, 0.0, 0.5]))]);
