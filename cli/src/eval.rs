@@ -20,6 +20,7 @@ mod dataset;
 mod masks;
 
 use std::collections::BTreeMap;
+use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -29,7 +30,9 @@ use fusepose_estimator::{
     ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
     Workspace, WorkspaceConfig,
 };
-use fusepose_scene::metrics::{BopResult, BopResultsWriter, MetricsRow, MetricsTable, ObjectMetric, plot_accuracy_curves};
+use fusepose_scene::metrics::{
+    BopResult, BopResultsWriter, MetricsRow, MetricsTable, ObjectMetric, PoseErrors, plot_accuracy_curves,
+};
 use fusepose_scene::{ObjectSet, Pose};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -96,6 +99,11 @@ pub struct Args {
     /// background (strips; 0 = keep all; default: the engine's).
     #[arg(long)]
     pub seg_max_elongation: Option<f32>,
+    /// `--masks net`: how cell labels become frame labels: `cells`,
+    /// `erode-cells` or `refine:N` (pixel borders from interpolated logits, N
+    /// pixels eroded); default: the engine's.
+    #[arg(long)]
+    pub seg_boundary: Option<fusepose_estimator::seg::Boundary>,
     /// Write one PNG per frame here: labels tinted (the segmenter's with `--masks net`),
     /// the poses of the last estimator drawn.
     #[arg(long)]
@@ -136,6 +144,13 @@ pub struct Args {
     /// Write BOP results CSV (with --compare: one file per estimator, `<stem>_<name>.csv`).
     #[arg(long)]
     pub csv: Option<PathBuf>,
+    /// Write one row per ground-truth object (its visible fraction, whether an
+    /// estimate was matched, ADD / ADD-S / ADD(S) in metres, the estimate's
+    /// confidence and mask size) and one per estimate matched to no object
+    /// (`ghost` = 1), to find where the accuracy goes (with several runs:
+    /// `<stem>_<name>.csv`).
+    #[arg(long)]
+    pub per_object_csv: Option<PathBuf>,
     /// Write a PNG of the ADD-S accuracy–threshold curves.
     #[arg(long)]
     pub plot: Option<PathBuf>,
@@ -161,7 +176,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let weights = args.seg_weights.as_ref().or(args.weights.as_ref()).context(
                 "--masks net needs --weights FILE with an embedded segmenter (or --seg-weights FILE)",
             )?;
-            Some(NetMasks::load(weights, &objects, args.seg_min_cells, args.seg_max_elongation)?)
+            Some(NetMasks::load(weights, &objects, args.seg_min_cells, args.seg_max_elongation, args.seg_boundary)?)
         }
     };
     let metrics = objects
@@ -220,6 +235,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         if let Some(csv) = runner.csv.take() {
             csv.finish().context("writing BOP results CSV")?;
         }
+        if let Some(out) = runner.per_object.take() {
+            out.finish().context("writing the per-object CSV")?;
+        }
     }
     if let Some(path) = &args.json {
         let json = if summaries.len() == 1 {
@@ -271,6 +289,7 @@ struct Runner {
     joined: usize,
     min_confidence: f32,
     csv: Option<BopResultsWriter>,
+    per_object: Option<PerObjectWriter>,
 }
 
 impl Runner {
@@ -305,6 +324,14 @@ impl Runner {
                 Some(BopResultsWriter::create(&path).with_context(|| format!("creating {}", path.display()))?)
             }
         };
+        let per_object = match &args.per_object_csv {
+            None => None,
+            Some(path) => {
+                let several = args.compare.len() > 1 || several_masks;
+                let path = if several { suffixed(path, &name.replace('/', "_")) } else { path.clone() };
+                Some(PerObjectWriter::create(&path).with_context(|| format!("creating {}", path.display()))?)
+            }
+        };
         Ok(Self {
             kind,
             masks,
@@ -323,6 +350,7 @@ impl Runner {
             joined: 0,
             min_confidence: args.min_confidence,
             csv,
+            per_object,
         })
     }
 
@@ -360,11 +388,22 @@ impl Runner {
         }
         let pairs = match_estimates(&frame.gt, self.poses.as_slice());
         self.unmatched += self.poses.len() - pairs.iter().filter(|(_, e)| e.is_some()).count();
-        for (gt, est) in pairs {
+        for &(gt, est) in &pairs {
             let errors = est.zip(metrics.get(gt.class_id as usize - 1)).map(|(e, m)| m.errors(&pose_of(e), &gt.pose));
             self.table.record(gt.class_id, errors);
             if let Some(v) = gt.visible {
                 self.by_visibility.record(visibility_bucket(v) as u16 + 1, errors);
+            }
+            if let Some(out) = &mut self.per_object {
+                out.write(frame, Some(gt), est, errors)?;
+            }
+        }
+        if let Some(out) = &mut self.per_object {
+            let poses = self.poses.as_slice();
+            for (i, p) in poses.iter().enumerate() {
+                if !pairs.iter().any(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, &poses[i]))) {
+                    out.write(frame, None, Some(p), None)?;
+                }
             }
         }
         if let Some(csv) = &mut self.csv {
@@ -468,6 +507,54 @@ fn match_estimates<'a>(gt: &'a [GtObject], poses: &'a [ObjectPose]) -> Vec<(&'a 
             (g, best.map(|i| &poses[i]))
         })
         .collect()
+}
+
+/// `--per-object-csv`: one row per ground-truth object and run.
+struct PerObjectWriter {
+    out: std::io::BufWriter<std::fs::File>,
+}
+
+impl PerObjectWriter {
+    const HEADER: &'static str =
+        "scene_id,im_id,obj_id,visible,found,add_m,add_s_m,add_or_add_s_m,confidence,mask_pixels,ghost";
+
+    fn create(path: &Path) -> std::io::Result<Self> {
+        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
+        writeln!(out, "{}", Self::HEADER)?;
+        Ok(Self { out })
+    }
+
+    /// A ground-truth object (`gt`) with its matched estimate, or (`gt` = `None`)
+    /// an estimate matched to no object. Unknown values are empty fields.
+    fn write(
+        &mut self,
+        frame: &EvalFrame,
+        gt: Option<&GtObject>,
+        est: Option<&ObjectPose>,
+        errors: Option<PoseErrors>,
+    ) -> std::io::Result<()> {
+        let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
+        let class_id = gt.map(|g| g.class_id).or(est.map(|e| e.class_id)).unwrap_or(0);
+        writeln!(
+            self.out,
+            "{},{},{},{},{},{},{},{},{},{},{}",
+            frame.scene_id,
+            frame.im_id,
+            class_id,
+            opt(gt.and_then(|g| g.visible)),
+            u8::from(est.is_some()),
+            opt(errors.map(|e| e.add)),
+            opt(errors.map(|e| e.add_s)),
+            opt(errors.map(|e| e.add_or_add_s)),
+            opt(est.map(|e| e.confidence as f64)),
+            est.map_or(String::new(), |e| e.mask_pixels.to_string()),
+            u8::from(gt.is_none()),
+        )
+    }
+
+    fn finish(mut self) -> std::io::Result<()> {
+        self.out.flush()
+    }
 }
 
 fn pose_of(p: &ObjectPose) -> Pose {

@@ -87,6 +87,10 @@ pub struct EstimatorConfig {
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
     pub join_parts: f32,
+    /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
+    /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
+    /// or `cells` (`fusepose_estimator::seg::Boundary`).
+    pub seg_boundary: String,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
     pub pin_cpus: Vec<usize>,
@@ -173,6 +177,7 @@ impl Default for EstimatorConfig {
             deadline_aware: true,
             min_confidence: 0.0,
             join_parts: 1.0,
+            seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }
@@ -258,6 +263,9 @@ impl DaemonConfig {
         }
         if !(e.join_parts.is_finite() && (0.0..=4.0).contains(&e.join_parts)) {
             return Err(invalid("estimator.join_parts", e.join_parts, "must be in 0..=4 (0 = off)"));
+        }
+        if e.seg_boundary.parse::<fusepose_estimator::seg::Boundary>().is_err() {
+            return Err(invalid("estimator.seg_boundary", &e.seg_boundary, "must be refine:N (N in 0..=255), erode-cells or cells"));
         }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
@@ -359,6 +367,10 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\njoin_parts = -1.0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.join_parts"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\njoin_parts = 0\n").unwrap().estimator.join_parts, 0.0);
+        let err = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.seg_boundary"), "{err}");
+        let c = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode-cells\"\n").unwrap();
+        assert_eq!(c.estimator.seg_boundary, "erode-cells");
         let err = DaemonConfig::parse("[estimator.tracking]\nfull_estimate_every = 0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.tracking.full_estimate_every"), "{err}");
         let err = DaemonConfig::parse("[estimator]\npin_cpus = [0, 1, 2]\n").unwrap_err().to_string();

@@ -7,7 +7,7 @@ use std::sync::Arc;
 
 use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions};
-use fusepose_estimator::seg::{SegEngine, SegError, SegFile};
+use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile};
 use fusepose_estimator::{
     EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
     WorkspaceConfig,
@@ -37,6 +37,8 @@ pub struct EngineSpec {
     /// many metres of each other are one instance (`estimator.join_parts`);
     /// empty = never join.
     pub part_extents: Vec<f32>,
+    /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
+    pub seg_boundary: Boundary,
 }
 
 /// The object set named by `estimator.objects`.
@@ -96,6 +98,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         let objects = load_objects(config)?;
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.segmenter = segmenter(config, &objects)?;
+        // Checked by the config's validation; a bad value there is an error, not this default.
+        spec.seg_boundary = config.seg_boundary.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_boundary: {e}"))?;
         spec.masks = config.masks;
         if let Some(seg) = &spec.segmenter {
             spec.description += &format!(
@@ -120,6 +124,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             masks: MaskSource::Labels,
             min_confidence: 0.0,
             part_extents: Vec::new(),
+            seg_boundary: Boundary::default(),
         })
     };
     match config.kind {
@@ -132,6 +137,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             masks: MaskSource::Labels,
             min_confidence: 0.0,
             part_extents: Vec::new(),
+            seg_boundary: Boundary::default(),
         }),
         EstimatorKind::Icp => icp(),
         EstimatorKind::Net => {
@@ -195,6 +201,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         masks: MaskSource::Labels,
         min_confidence: 0.0,
         part_extents: Vec::new(),
+        seg_boundary: Boundary::default(),
     })
 }
 
@@ -245,7 +252,11 @@ impl PoseEngine {
             None => None,
         };
         let segmenter = match (&estimator, &spec.segmenter) {
-            (Some(_), Some(file)) => Some(SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?),
+            (Some(_), Some(file)) => {
+                let mut seg = SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?;
+                seg.set_boundary(spec.seg_boundary);
+                Some(seg)
+            }
             _ => None,
         };
         Ok(Self {

@@ -109,7 +109,7 @@ fn segment_labels_are_argmax_of_burn_logits() {
     // Plain argmax: no fragment or strip removal (tested in the engine's unit tests).
     engine.set_min_component_cells(0);
     engine.set_max_elongation(0.0);
-    engine.set_erode(false);
+    engine.set_boundary(fusepose_estimator::seg::Boundary::Cells);
     // A 640x480 frame with smooth structure so the logits vary across cells.
     let (w, h) = (640usize, 480usize);
     let color: Vec<u8> =

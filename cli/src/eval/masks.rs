@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
-use fusepose_estimator::seg::SegEngine;
+use fusepose_estimator::seg::{Boundary, SegEngine};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
 use fusepose_scene::ObjectSet;
 use fusepose_train::seg::validate::Confusion;
@@ -32,6 +32,7 @@ impl NetMasks {
         objects: &ObjectSet,
         min_cells: Option<usize>,
         max_elongation: Option<f32>,
+        boundary: Option<Boundary>,
     ) -> anyhow::Result<Self> {
         let mut engine = SegEngine::load(weights, objects).with_context(|| {
             format!(
@@ -44,6 +45,9 @@ impl NetMasks {
         }
         if let Some(e) = max_elongation {
             engine.set_max_elongation(e);
+        }
+        if let Some(b) = boundary {
+            engine.set_boundary(b);
         }
         Ok(Self {
             engine,

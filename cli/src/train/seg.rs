@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use fusepose_estimator::net::WeightFile;
-use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile, file};
+use fusepose_estimator::seg::{Boundary, SegConfig, SegEngine, SegFile, file};
 use fusepose_scene::ObjectSet;
 use fusepose_train::seg::{SegTrainConfig, SegValidation, train_segmenter, validate};
 
@@ -170,21 +170,27 @@ fn bench(set: &ObjectSet, weights: Option<&Path>) -> anyhow::Result<()> {
     };
     let frame = fusepose_train::seg::data::frame_view(k, &target);
     let mut labels = vec![0u16; k.width as usize * k.height as usize];
-    for _ in 0..5 {
-        engine.segment(&frame, &mut labels)?;
+    let default = engine.boundary();
+    let modes = [Boundary::Cells, Boundary::ErodeCells, Boundary::Refine { erode_px: 3 }];
+    for mode in std::iter::once(default).chain(modes.into_iter().filter(|m| *m != default)) {
+        engine.set_boundary(mode);
+        for _ in 0..5 {
+            engine.segment(&frame, &mut labels)?;
+        }
+        let mut times: Vec<f64> = (0..200)
+            .map(|_| {
+                let t = Instant::now();
+                engine
+                    .segment(&frame, &mut labels)
+                    .map(|()| t.elapsed().as_secs_f64() * 1e3)
+            })
+            .collect::<Result<_, _>>()?;
+        times.sort_by(f64::total_cmp);
+        let tag = if mode == default { " (default)" } else { "" };
+        println!(
+            "segment {}x{}, boundary {mode}{tag}: median {:.2} ms, p99 {:.2} ms, max {:.2} ms (200 frames, one thread)",
+            k.width, k.height, times[100], times[197], times[199]
+        );
     }
-    let mut times: Vec<f64> = (0..200)
-        .map(|_| {
-            let t = Instant::now();
-            engine
-                .segment(&frame, &mut labels)
-                .map(|()| t.elapsed().as_secs_f64() * 1e3)
-        })
-        .collect::<Result<_, _>>()?;
-    times.sort_by(f64::total_cmp);
-    println!(
-        "segment {}x{}: median {:.2} ms, p99 {:.2} ms, max {:.2} ms (200 frames, one thread)",
-        k.width, k.height, times[100], times[197], times[199]
-    );
     Ok(())
 }

@@ -2,9 +2,9 @@
 //! GEMM ([`crate::net::gemm`]) per convolution, nearest upsampling into the
 //! decoder's concatenation buffers (skip features are written there directly
 //! by the encoder), a 1x1 head, per-cell argmax, removal of small label
-//! fragments ([`SegEngine::set_min_component_cells`]), a one-cell erosion of
-//! every region ([`SegEngine::set_erode`]) and nearest upsampling of the cell
-//! labels to the frame. Mirrors `fusepose_train::seg::model` operation for
+//! fragments ([`SegEngine::set_min_component_cells`]) and the cell labels
+//! brought to the frame ([`SegEngine::set_boundary`]: nearest, after a
+//! one-cell erosion, or with pixel borders from interpolated logits). Mirrors `fusepose_train::seg::model` operation for
 //! operation; after the first frame of a size, [`SegEngine::segment`] does not allocate.
 
 use std::path::Path;
@@ -12,6 +12,7 @@ use std::path::Path;
 use fusepose_scene::ObjectSet;
 use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2};
 
+use super::boundary::{Boundary, BoundaryScratch, refine};
 use super::config::{INPUT_CHANNELS, SegConfig};
 use super::file::SegFile;
 use super::input::FrameMap;
@@ -170,9 +171,11 @@ pub struct SegEngine {
     cells: Vec<u16>,
     min_component_cells: usize,
     max_elongation: f32,
-    erode: bool,
-    /// Eroded cell labels (when `erode`).
+    boundary: Boundary,
+    /// Eroded cell labels ([`Boundary::ErodeCells`]).
     eroded: Vec<u16>,
+    /// [`Boundary::Refine`]'s per-frame scratch.
+    refine_scratch: BoundaryScratch,
     /// Flood-fill scratch over the cells (capacity = cell count, never grown).
     seen: Vec<bool>,
     stack: Vec<u32>,
@@ -231,8 +234,9 @@ impl SegEngine {
             cells: vec![0; hw(1)],
             min_component_cells: MIN_COMPONENT_CELLS,
             max_elongation: MAX_ELONGATION,
-            erode: true,
+            boundary: Boundary::default(),
             eroded: vec![0; hw(1)],
+            refine_scratch: BoundaryScratch::default(),
             seen: vec![false; hw(1)],
             stack: Vec::with_capacity(hw(1)),
             members: Vec::with_capacity(hw(1)),
@@ -277,13 +281,19 @@ impl SegEngine {
         self.max_elongation = elongation;
     }
 
-    /// Whether region borders (one output cell wide) are written as background
-    /// (default: yes). Cell-sized label steps put up to half a cell of background
-    /// into an object's mask, and those points cost the pose network far more
-    /// than the rim it loses: ADD-S AUC 68 → 81 on the held-out split with an
-    /// early checkpoint (docs/BENCHMARKS.md).
-    pub fn set_erode(&mut self, erode: bool) {
-        self.erode = erode;
+    /// How cell labels become the frame's labels ([`Boundary`]; default
+    /// [`Boundary::default`]). Cell-sized
+    /// label steps put up to half a cell of background into an object's mask,
+    /// and those points cost the pose network far more than the rim it loses
+    /// ([`Boundary::ErodeCells`] vs [`Boundary::Cells`]: ADD-S AUC 68 → 81 on
+    /// the held-out split with an early checkpoint, docs/BENCHMARKS.md).
+    pub fn set_boundary(&mut self, boundary: Boundary) {
+        self.boundary = boundary;
+    }
+
+    /// The current [`Boundary`] mode.
+    pub fn boundary(&self) -> Boundary {
+        self.boundary
     }
 
     /// Segments `frame` into `labels_out` (`width * height` class ids, 0 = background).
@@ -310,11 +320,15 @@ impl SegEngine {
             &mut self.stack,
             &mut self.members,
         );
-        if self.erode {
-            erode_boundaries(&self.cells, out_w, &mut self.eroded);
-            map.upsample(&self.eroded, labels_out);
-        } else {
-            map.upsample(&self.cells, labels_out);
+        match self.boundary {
+            Boundary::Cells => map.upsample(&self.cells, labels_out),
+            Boundary::ErodeCells => {
+                erode_boundaries(&self.cells, out_w, &mut self.eroded);
+                map.upsample(&self.eroded, labels_out);
+            }
+            Boundary::Refine { erode_px } => {
+                refine(&map, &self.cells, &self.logits, erode_px, &mut self.refine_scratch, labels_out)
+            }
         }
         self.map = Some(map);
         Ok(())

@@ -22,6 +22,15 @@ fn boxes(len: usize, n: usize) -> Vec<(usize, usize)> {
         .collect()
 }
 
+/// Pixel `i` of `len` on a grid of `n` cells (cell c's centre at pixel
+/// coordinate (c + ½)·len/n): the cells either side and the weight of the
+/// second, clamped at the ends.
+fn interp(i: usize, len: usize, n: usize) -> (usize, usize, f32) {
+    let x = ((i as f64 + 0.5) * n as f64 / len as f64 - 0.5).clamp(0.0, (n - 1) as f64);
+    let x0 = x.floor() as usize;
+    (x0, (x0 + 1).min(n - 1), (x - x0 as f64) as f32)
+}
+
 /// Index tables between a `width` x `height` frame and a config's input and output grids.
 #[derive(Clone, Debug)]
 pub struct FrameMap {
@@ -40,6 +49,12 @@ pub struct FrameMap {
     /// Frame column / row sampled for each output cell's training target.
     centre_x: Vec<u32>,
     centre_y: Vec<u32>,
+    /// Frame columns / rows `[start, end)` that upsample to each cell (may be empty).
+    span_x: Vec<(u32, u32)>,
+    span_y: Vec<(u32, u32)>,
+    /// Per frame column / row: bilinear cells and weight ([`interp`]).
+    interp_x: Vec<(u32, u32, f32)>,
+    interp_y: Vec<(u32, u32, f32)>,
 }
 
 impl FrameMap {
@@ -62,6 +77,25 @@ impl FrameMap {
         };
         let centre_x = centre(&up_x, out_w, width);
         let centre_y = centre(&up_y, out_h, height);
+        let span = |map: &[u32], n: usize| -> Vec<(u32, u32)> {
+            (0..n)
+                .map(|c| {
+                    let lo = map.partition_point(|&m| (m as usize) < c);
+                    let hi = map.partition_point(|&m| (m as usize) <= c);
+                    (lo as u32, hi as u32)
+                })
+                .collect()
+        };
+        let table = |len: usize, n: usize| -> Vec<(u32, u32, f32)> {
+            (0..len)
+                .map(|i| {
+                    let (a, b, f) = interp(i, len, n);
+                    (a as u32, b as u32, f)
+                })
+                .collect()
+        };
+        let span_x = span(&up_x, out_w);
+        let span_y = span(&up_y, out_h);
         Self {
             width,
             height,
@@ -75,6 +109,10 @@ impl FrameMap {
             up_y,
             centre_x,
             centre_y,
+            span_x,
+            span_y,
+            interp_x: table(width, out_w),
+            interp_y: table(height, out_h),
         }
     }
 
@@ -136,6 +174,41 @@ impl FrameMap {
                 out[3 * plane + i] = if zn > 0 { zsum / zn as f32 } else { 0.0 };
             }
         }
+    }
+
+    /// `(out_w, out_h)`: the output grid in cells.
+    pub fn grid_size(&self) -> (usize, usize) {
+        (self.out_w, self.out_h)
+    }
+
+    /// `(width, height)` of the frame in pixels.
+    pub fn frame_size(&self) -> (usize, usize) {
+        (self.width, self.height)
+    }
+
+    /// Frame columns `[start, end)` of cell column `cx` (empty when the frame is narrower than the grid).
+    pub fn span_x(&self, cx: usize) -> std::ops::Range<usize> {
+        let (a, b) = self.span_x[cx];
+        a as usize..b as usize
+    }
+
+    /// Frame rows `[start, end)` of cell row `cy`.
+    pub fn span_y(&self, cy: usize) -> std::ops::Range<usize> {
+        let (a, b) = self.span_y[cy];
+        a as usize..b as usize
+    }
+
+    /// Bilinear interpolation between cell centres for frame column `u`:
+    /// the cell columns left and right of the pixel centre and the weight of the right one.
+    pub fn interp_x(&self, u: usize) -> (usize, usize, f32) {
+        let (a, b, f) = self.interp_x[u];
+        (a as usize, b as usize, f)
+    }
+
+    /// As [`FrameMap::interp_x`] for frame row `v`.
+    pub fn interp_y(&self, v: usize) -> (usize, usize, f32) {
+        let (a, b, f) = self.interp_y[v];
+        (a as usize, b as usize, f)
     }
 
     /// Nearest upsampling of per-cell labels `[out_h * out_w]` to the frame (`labels_out`: width * height).

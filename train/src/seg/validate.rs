@@ -120,9 +120,9 @@ impl Confusion {
 
 /// Renders `frames` held-out scenes and scores `engine` on them: the network's
 /// labels after fragment removal, before the erosion meant for pose input
-/// (`SegEngine::set_erode`, switched off here).
+/// (`SegEngine::set_boundary`: plain cells here).
 pub fn validate(engine: &mut SegEngine, set: &ObjectSet, frames: usize) -> anyhow::Result<SegValidation> {
-    engine.set_erode(false);
+    engine.set_boundary(fusepose_estimator::seg::Boundary::Cells);
     let k = Intrinsics::YCB_VIDEO;
     let mut target = RenderTarget::for_intrinsics(&k);
     let mut pred = vec![0u16; k.width as usize * k.height as usize];
