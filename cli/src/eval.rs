@@ -99,6 +99,10 @@ pub struct Args {
     /// background (strips; 0 = keep all; default: the engine's).
     #[arg(long)]
     pub seg_max_elongation: Option<f32>,
+    /// `--masks net`: regions with fewer interior cells (all four neighbours
+    /// of their class) become background (default: the engine's, 1).
+    #[arg(long)]
+    pub seg_min_interior: Option<usize>,
     /// `--masks net`: how cell labels become frame labels: `cells`,
     /// `erode-cells` or `refine:N` (pixel borders from interpolated logits, N
     /// pixels eroded); default: the engine's.
@@ -176,7 +180,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let weights = args.seg_weights.as_ref().or(args.weights.as_ref()).context(
                 "--masks net needs --weights FILE with an embedded segmenter (or --seg-weights FILE)",
             )?;
-            Some(NetMasks::load(weights, &objects, args.seg_min_cells, args.seg_max_elongation, args.seg_boundary)?)
+            Some(NetMasks::load(weights, &objects, args.seg_min_cells, args.seg_max_elongation, args.seg_boundary, args.seg_min_interior)?)
         }
     };
     let metrics = objects

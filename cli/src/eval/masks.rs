@@ -33,6 +33,7 @@ impl NetMasks {
         min_cells: Option<usize>,
         max_elongation: Option<f32>,
         boundary: Option<Boundary>,
+        min_interior: Option<usize>,
     ) -> anyhow::Result<Self> {
         let mut engine = SegEngine::load(weights, objects).with_context(|| {
             format!(
@@ -45,6 +46,9 @@ impl NetMasks {
         }
         if let Some(e) = max_elongation {
             engine.set_max_elongation(e);
+        }
+        if let Some(n) = min_interior {
+            engine.set_min_interior_cells(n);
         }
         if let Some(b) = boundary {
             engine.set_boundary(b);
