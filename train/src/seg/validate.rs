@@ -119,10 +119,12 @@ impl Confusion {
 }
 
 /// Renders `frames` held-out scenes and scores `engine` on them: the network's
-/// labels after fragment removal, before the erosion meant for pose input
-/// (`SegEngine::set_boundary`: plain cells here).
+/// labels after small-fragment and strip removal, as plain cells
+/// (`SegEngine::set_boundary`) and without the interior-cell rule (session 7),
+/// so runs stay comparable with the earlier ones.
 pub fn validate(engine: &mut SegEngine, set: &ObjectSet, frames: usize) -> anyhow::Result<SegValidation> {
     engine.set_boundary(fusepose_estimator::seg::Boundary::Cells);
+    engine.set_min_interior_cells(0);
     let k = Intrinsics::YCB_VIDEO;
     let mut target = RenderTarget::for_intrinsics(&k);
     let mut pred = vec![0u16; k.width as usize * k.height as usize];
