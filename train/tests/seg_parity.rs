@@ -106,9 +106,10 @@ fn segment_labels_are_argmax_of_burn_logits() {
     let path = dir.path().join("seg.safetensors");
     let net = save_random(&cfg, &set, &path);
     let mut engine = SegEngine::load(&path, &set).unwrap();
-    // Plain argmax: no fragment or strip removal (tested in the engine's unit tests).
+    // Plain argmax: no fragment, strip or interior-less region removal (tested in the engine's unit tests).
     engine.set_min_component_cells(0);
     engine.set_max_elongation(0.0);
+    engine.set_min_interior_cells(0);
     engine.set_boundary(fusepose_estimator::seg::Boundary::Cells);
     // A 640x480 frame with smooth structure so the logits vary across cells.
     let (w, h) = (640usize, 480usize);
