@@ -18,9 +18,9 @@
 
 mod dataset;
 mod masks;
+mod per_object;
 
 use std::collections::BTreeMap;
-use std::io::Write;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
@@ -31,13 +31,14 @@ use fusepose_estimator::{
     Workspace, WorkspaceConfig,
 };
 use fusepose_scene::metrics::{
-    BopResult, BopResultsWriter, MetricsRow, MetricsTable, ObjectMetric, PoseErrors, plot_accuracy_curves,
+    BopResult, BopResultsWriter, MetricsRow, MetricsTable, ObjectMetric, plot_accuracy_curves,
 };
 use fusepose_scene::{ObjectSet, Pose};
 use indicatif::{ProgressBar, ProgressStyle};
 
 use dataset::{EvalDataset, EvalFrame, GtObject};
 use masks::NetMasks;
+use per_object::PerObjectWriter;
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum EstimatorKind {
@@ -293,7 +294,7 @@ struct Runner {
     joined: usize,
     min_confidence: f32,
     csv: Option<BopResultsWriter>,
-    per_object: Option<PerObjectWriter>,
+    per_object: Option<PerObjectWriter<std::io::BufWriter<std::fs::File>>>,
 }
 
 impl Runner {
@@ -399,14 +400,14 @@ impl Runner {
                 self.by_visibility.record(visibility_bucket(v) as u16 + 1, errors);
             }
             if let Some(out) = &mut self.per_object {
-                out.write(frame, Some(gt), est, errors)?;
+                out.write((frame.scene_id, frame.im_id), Some(gt), est, errors)?;
             }
         }
         if let Some(out) = &mut self.per_object {
             let poses = self.poses.as_slice();
             for (i, p) in poses.iter().enumerate() {
                 if !pairs.iter().any(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, &poses[i]))) {
-                    out.write(frame, None, Some(p), None)?;
+                    out.write((frame.scene_id, frame.im_id), None, Some(p), None)?;
                 }
             }
         }
@@ -511,54 +512,6 @@ fn match_estimates<'a>(gt: &'a [GtObject], poses: &'a [ObjectPose]) -> Vec<(&'a 
             (g, best.map(|i| &poses[i]))
         })
         .collect()
-}
-
-/// `--per-object-csv`: one row per ground-truth object and run.
-struct PerObjectWriter {
-    out: std::io::BufWriter<std::fs::File>,
-}
-
-impl PerObjectWriter {
-    const HEADER: &'static str =
-        "scene_id,im_id,obj_id,visible,found,add_m,add_s_m,add_or_add_s_m,confidence,mask_pixels,ghost";
-
-    fn create(path: &Path) -> std::io::Result<Self> {
-        let mut out = std::io::BufWriter::new(std::fs::File::create(path)?);
-        writeln!(out, "{}", Self::HEADER)?;
-        Ok(Self { out })
-    }
-
-    /// A ground-truth object (`gt`) with its matched estimate, or (`gt` = `None`)
-    /// an estimate matched to no object. Unknown values are empty fields.
-    fn write(
-        &mut self,
-        frame: &EvalFrame,
-        gt: Option<&GtObject>,
-        est: Option<&ObjectPose>,
-        errors: Option<PoseErrors>,
-    ) -> std::io::Result<()> {
-        let opt = |v: Option<f64>| v.map_or(String::new(), |v| format!("{v:.6}"));
-        let class_id = gt.map(|g| g.class_id).or(est.map(|e| e.class_id)).unwrap_or(0);
-        writeln!(
-            self.out,
-            "{},{},{},{},{},{},{},{},{},{},{}",
-            frame.scene_id,
-            frame.im_id,
-            class_id,
-            opt(gt.and_then(|g| g.visible)),
-            u8::from(est.is_some()),
-            opt(errors.map(|e| e.add)),
-            opt(errors.map(|e| e.add_s)),
-            opt(errors.map(|e| e.add_or_add_s)),
-            opt(est.map(|e| e.confidence as f64)),
-            est.map_or(String::new(), |e| e.mask_pixels.to_string()),
-            u8::from(gt.is_none()),
-        )
-    }
-
-    fn finish(mut self) -> std::io::Result<()> {
-        self.out.flush()
-    }
 }
 
 fn pose_of(p: &ObjectPose) -> Pose {
