@@ -24,19 +24,12 @@ impl ChildProcess {
         ready_timeout: Duration,
     ) -> anyhow::Result<Self> {
         let mut cmd = Command::new(std::env::current_exe()?);
-        cmd.args(args)
-            .stdout(Stdio::piped())
-            .stderr(Stdio::inherit());
+        cmd.args(args).stdout(Stdio::piped()).stderr(Stdio::inherit());
         for (k, v) in env {
             cmd.env(k, v);
         }
-        let mut child = cmd
-            .spawn()
-            .map_err(|e| anyhow::anyhow!("cannot start {name}: {e}"))?;
-        let stdout: ChildStdout = child
-            .stdout
-            .take()
-            .ok_or_else(|| anyhow::anyhow!("{name}: no stdout"))?;
+        let mut child = cmd.spawn().map_err(|e| anyhow::anyhow!("cannot start {name}: {e}"))?;
+        let stdout: ChildStdout = child.stdout.take().ok_or_else(|| anyhow::anyhow!("{name}: no stdout"))?;
         let (tx, lines) = channel();
         std::thread::spawn(move || {
             for line in BufReader::new(stdout).lines().map_while(Result::ok) {
@@ -110,11 +103,7 @@ impl IpcNamespace {
         let dir = std::env::temp_dir().join(format!("fusepose-bench-{tag}-{}", std::process::id()));
         let root = dir.join("iox2");
         std::fs::create_dir_all(&root)?;
-        Ok(Self {
-            dir,
-            root,
-            prefix: format!("fpb{}{tag}_", std::process::id()),
-        })
+        Ok(Self { dir, root, prefix: format!("fpb{}{tag}_", std::process::id()) })
     }
 
     pub fn options(&self) -> fusepose_client::IpcOptions {
@@ -127,10 +116,7 @@ impl IpcNamespace {
 
     /// The environment that puts a child process in this namespace.
     pub fn env(&self) -> Vec<(&'static str, String)> {
-        vec![
-            ("FUSEPOSE_IOX2_ROOT", self.root.display().to_string()),
-            ("FUSEPOSE_IOX2_PREFIX", self.prefix.clone()),
-        ]
+        vec![("FUSEPOSE_IOX2_ROOT", self.root.display().to_string()), ("FUSEPOSE_IOX2_PREFIX", self.prefix.clone())]
     }
 }
 
@@ -138,11 +124,7 @@ impl Drop for IpcNamespace {
     fn drop(&mut self) {
         if let Ok(entries) = std::fs::read_dir("/dev/shm") {
             for entry in entries.flatten() {
-                if entry
-                    .file_name()
-                    .to_string_lossy()
-                    .starts_with(&self.prefix)
-                {
+                if entry.file_name().to_string_lossy().starts_with(&self.prefix) {
                     let _ = std::fs::remove_file(entry.path());
                 }
             }

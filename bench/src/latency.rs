@@ -48,8 +48,7 @@ pub fn write_hlog(
     let mut log = fusepose_daemon::interval_log::IntervalLog::create(path, 0, comment)
         .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     for (tag, h) in series {
-        log.write(tag, 0, duration_ns, h)
-            .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+        log.write(tag, 0, duration_ns, h).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
     }
     Ok(())
 }
@@ -64,18 +63,8 @@ pub fn plot_percentiles(
 ) -> anyhow::Result<()> {
     let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("{}: {e}", path.display());
     let labels = ["p50", "p99", "p99.9", "max"];
-    let values: Vec<f64> = series
-        .iter()
-        .flat_map(|(_, p)| p.scaled(ns_per_unit))
-        .filter(|v| *v > 0.0)
-        .collect();
-    let y_min = values
-        .iter()
-        .copied()
-        .fold(f64::INFINITY, f64::min)
-        .min(1.0)
-        .max(1e-3)
-        * 0.5;
+    let values: Vec<f64> = series.iter().flat_map(|(_, p)| p.scaled(ns_per_unit)).filter(|v| *v > 0.0).collect();
+    let y_min = values.iter().copied().fold(f64::INFINITY, f64::min).min(1.0).max(1e-3) * 0.5;
     let y_max = values.iter().copied().fold(0.0, f64::max).max(y_min * 10.0) * 2.0;
     let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;
@@ -89,33 +78,21 @@ pub fn plot_percentiles(
     chart
         .configure_mesh()
         .x_labels(4)
-        .x_label_formatter(&|x| {
-            labels
-                .get(x.round() as usize)
-                .map_or(String::new(), |s| s.to_string())
-        })
+        .x_label_formatter(&|x| labels.get(x.round() as usize).map_or(String::new(), |s| s.to_string()))
         .x_desc("percentile")
         .y_desc(format!("latency ({unit}, log scale)"))
         .draw()
         .map_err(|e| err(&e))?;
     for (i, (name, p)) in series.iter().enumerate() {
         let colour = Palette99::pick(i).to_rgba();
-        let points: Vec<(f64, f64)> = p
-            .scaled(ns_per_unit)
-            .iter()
-            .enumerate()
-            .map(|(x, &v)| (x as f64, v.max(y_min)))
-            .collect();
+        let points: Vec<(f64, f64)> =
+            p.scaled(ns_per_unit).iter().enumerate().map(|(x, &v)| (x as f64, v.max(y_min))).collect();
         chart
             .draw_series(LineSeries::new(points.clone(), colour.stroke_width(2)))
             .map_err(|e| err(&e))?
             .label(name.as_str())
-            .legend(move |(x, y)| {
-                PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2))
-            });
-        chart
-            .draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled())))
-            .map_err(|e| err(&e))?;
+            .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
+        chart.draw_series(points.iter().map(|&p| Circle::new(p, 3, colour.filled()))).map_err(|e| err(&e))?;
     }
     chart
         .configure_series_labels()

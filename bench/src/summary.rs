@@ -20,7 +20,14 @@ impl Summary {
         let mut v = samples.to_vec();
         v.sort_by(f64::total_cmp);
         let rank = |p: f64| v[((p * v.len() as f64).ceil() as usize).clamp(1, v.len()) - 1];
-        Some(Self { count: v.len(), median: rank(0.5), p90: rank(0.9), p99: rank(0.99), min: v[0], max: v[v.len() - 1] })
+        Some(Self {
+            count: v.len(),
+            median: rank(0.5),
+            p90: rank(0.9),
+            p99: rank(0.99),
+            min: v[0],
+            max: v[v.len() - 1],
+        })
     }
 
     /// Every statistic finite.

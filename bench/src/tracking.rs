@@ -129,15 +129,9 @@ fn run_mode(
         full_estimate_every: args.full_estimate_every,
         refine_iterations: args.tracking_iterations,
     });
-    let options = NetOptions {
-        refine_iterations: None,
-        threads: 1,
-        tracking: tracking_config,
-        pin_worker_cpu: None,
-    };
+    let options = NetOptions { refine_iterations: None, threads: 1, tracking: tracking_config, pin_worker_cpu: None };
     let mut est = NetEstimator::load(&args.weights, set, options)?;
-    let mut ws = Workspace::new(est.workspace_config(objects.max(1) + 2))
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut ws = Workspace::new(est.workspace_config(objects.max(1) + 2)).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut out = PoseSet::with_capacity(objects.max(1) + 2);
     let (mut wall, mut cpu_total, mut prepare) = (Vec::new(), 0.0, Vec::new());
     let (mut poses, mut add_sum, mut below_2cm, mut below_10pct) = (0u64, 0.0, 0u64, 0u64);
@@ -153,10 +147,7 @@ fn run_mode(
             let a0 = alloc_count::allocations();
             let (t1, c1) = (Instant::now(), cpu_time::thread_cpu_ms());
             est.estimate(&view, &mut ws, &mut out)?;
-            let (ms, cpu) = (
-                t1.elapsed().as_secs_f64() * 1e3,
-                cpu_time::thread_cpu_ms() - c1,
-            );
+            let (ms, cpu) = (t1.elapsed().as_secs_f64() * 1e3, cpu_time::thread_cpu_ms() - c1);
             // Steady state: after the first frames of the first sequence.
             if v > 0 || f >= 3 {
                 allocs += alloc_count::allocations() - a0;
@@ -174,9 +165,7 @@ fn run_mode(
                 let m = &metrics[p.class_id as usize - 1];
                 let est_pose = pose_of(p);
                 let e = m.add_or_add_s(&est_pose, truth);
-                let diameter = set
-                    .by_class(p.class_id)
-                    .map_or(f64::INFINITY, |o| o.diameter);
+                let diameter = set.by_class(p.class_id).map_or(f64::INFINITY, |o| o.diameter);
                 poses += 1;
                 add_sum += e;
                 below_2cm += (m.add_s(&est_pose, truth) < 0.02) as u64;
@@ -185,8 +174,8 @@ fn run_mode(
         }
     }
     let counters = est.counters();
-    let wall_summary = Summary::of(&wall)
-        .ok_or_else(|| anyhow::anyhow!("no object was posed ({objects} objects per scene)"))?;
+    let wall_summary =
+        Summary::of(&wall).ok_or_else(|| anyhow::anyhow!("no object was posed ({objects} objects per scene)"))?;
     let pct = |x: u64| 100.0 * x as f64 / poses.max(1) as f64;
     Ok(ModeRow {
         objects,
@@ -200,44 +189,24 @@ fn run_mode(
         add_or_add_s_mm: add_sum / poses.max(1) as f64 * 1e3,
         add_s_below_2cm: pct(below_2cm),
         add_or_add_s_below_10pct: pct(below_10pct),
-        allocs_per_frame: (counting && alloc_frames > 0)
-            .then(|| allocs as f64 / alloc_frames as f64),
+        allocs_per_frame: (counting && alloc_frames > 0).then(|| allocs as f64 / alloc_frames as f64),
     })
 }
 
 /// Renders the sequences and runs both modes per object count; progress on stderr.
 pub fn run(args: &TrackingArgs) -> anyhow::Result<TrackingReport> {
-    anyhow::ensure!(
-        args.weights.exists(),
-        "{} does not exist (the network weights)",
-        args.weights.display()
-    );
+    anyhow::ensure!(args.weights.exists(), "{} does not exist (the network weights)", args.weights.display());
     let load_before = loadavg::loadavg();
     let set = fusepose_scene::builtin::builtin_objects();
-    let metrics: Vec<ObjectMetric> = set
-        .objects
-        .iter()
-        .map(ObjectMetric::for_model)
-        .collect::<Result<_, _>>()?;
-    let (sequences, frames) = if args.smoke {
-        (1, args.frames.min(8))
-    } else {
-        (args.sequences.max(1), args.frames.max(2))
-    };
+    let metrics: Vec<ObjectMetric> = set.objects.iter().map(ObjectMetric::for_model).collect::<Result<_, _>>()?;
+    let (sequences, frames) =
+        if args.smoke { (1, args.frames.min(8)) } else { (args.sequences.max(1), args.frames.max(2)) };
     let mut rows = Vec::new();
     for &k in &args.objects {
-        eprintln!(
-            "tracking: rendering {sequences} sequence(s) of {frames} frames with {k} object(s) ..."
-        );
+        eprintln!("tracking: rendering {sequences} sequence(s) of {frames} frames with {k} object(s) ...");
         let videos: Vec<Video> = (0..sequences)
             .map(|s| {
-                video::render_video(
-                    &set,
-                    k,
-                    frames,
-                    args.degrees_per_frame,
-                    500 + 37 * s as u64 + 1000 * k as u64,
-                )
+                video::render_video(&set, k, frames, args.degrees_per_frame, 500 + 37 * s as u64 + 1000 * k as u64)
             })
             .collect::<anyhow::Result<_>>()?;
         for tracking in [false, true] {
@@ -245,12 +214,7 @@ pub fn run(args: &TrackingArgs) -> anyhow::Result<TrackingReport> {
             rows.push(run_mode(&set, &metrics, &videos, args, k, tracking)?);
         }
     }
-    Ok(TrackingReport {
-        args: args.clone(),
-        rows,
-        load_before,
-        load_after: loadavg::loadavg(),
-    })
+    Ok(TrackingReport { args: args.clone(), rows, load_before, load_after: loadavg::loadavg() })
 }
 
 /// The printed table.
@@ -260,14 +224,23 @@ pub fn render(r: &TrackingReport) -> String {
         "tracking: net estimator, 1 thread, rendered videos (camera orbiting {}°/frame), tracking: fit <= {} mm, full estimate every {} frames, {} refiner iterations\n",
         a.degrees_per_frame, a.max_fit_mm, a.full_estimate_every, a.tracking_iterations
     );
-    s.push_str(&format!(
-        "loadavg before: {}   cpus: {}\n\n",
-        r.load_before,
-        loadavg::cpus()
-    ));
+    s.push_str(&format!("loadavg before: {}   cpus: {}\n\n", r.load_before, loadavg::cpus()));
     s.push_str(&format!(
         "{:>7} {:>9} {:>6} {:>6} {:>11} {:>11} {:>11} {:>9} {:>8} {:>11} {:>10} {:>11} {:>10} {:>11}\n",
-        "objects", "tracking", "frames", "poses", "ms/obj p50", "ms/obj p90", "CPU ms/obj", "poses/s", "tracked", "ADD(S) mm", "ADD-S<2cm", "ADD(S)<0.1d", "prepare ms", "allocs/frm"
+        "objects",
+        "tracking",
+        "frames",
+        "poses",
+        "ms/obj p50",
+        "ms/obj p90",
+        "CPU ms/obj",
+        "poses/s",
+        "tracked",
+        "ADD(S) mm",
+        "ADD-S<2cm",
+        "ADD(S)<0.1d",
+        "prepare ms",
+        "allocs/frm"
     ));
     for x in &r.rows {
         s.push_str(&format!(

@@ -9,9 +9,7 @@
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane};
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::viewpoint::look_at;
-use fusepose_scene::sampler::{
-    CameraView, LabelKind, SamplerConfig, render_view_labelled, sample_scene,
-};
+use fusepose_scene::sampler::{CameraView, LabelKind, SamplerConfig, render_view_labelled, sample_scene};
 use fusepose_scene::{Intrinsics, ObjectSet, Pose};
 use nalgebra::{Point3, Vector3};
 
@@ -33,10 +31,7 @@ impl VideoFrame {
             intrinsics,
             color_format: ColorFormat::Rgb8,
             color: &self.rgb,
-            depth: DepthPlane::U16 {
-                data: &self.depth,
-                scale: DEPTH_SCALE_M,
-            },
+            depth: DepthPlane::U16 { data: &self.depth, scale: DEPTH_SCALE_M },
             labels: Some(LabelPlane::U16(&self.labels)),
         }
     }
@@ -67,19 +62,11 @@ pub fn render_video(
         camera_elevation_deg: (35.0, 50.0),
         ..SamplerConfig::default()
     };
-    let mut scene =
-        sample_scene(set, &cfg, seed).map_err(|e| anyhow::anyhow!("scene {seed}: {e}"))?;
-    let centroid = scene.objects.iter().fold(Vector3::zeros(), |a, o| {
-        a + o.table_from_object.translation.vector
-    }) / scene.objects.len().max(1) as f64;
+    let mut scene = sample_scene(set, &cfg, seed).map_err(|e| anyhow::anyhow!("scene {seed}: {e}"))?;
+    let centroid = scene.objects.iter().fold(Vector3::zeros(), |a, o| a + o.table_from_object.translation.vector)
+        / scene.objects.len().max(1) as f64;
     let target = Point3::from(centroid + Vector3::new(0.0, 0.0, 0.05));
-    let eye = Point3::from(
-        scene.views[0]
-            .camera_from_table
-            .inverse()
-            .translation
-            .vector,
-    );
+    let eye = Point3::from(scene.views[0].camera_from_table.inverse().translation.vector);
     let offset = eye - target;
     let (radius, height) = (offset.xy().norm(), offset.z);
     let start = offset.y.atan2(offset.x);
@@ -87,27 +74,15 @@ pub fn render_video(
         .map(|i| {
             let a = start + (i as f64 * degrees_per_frame).to_radians();
             let eye = target + Vector3::new(radius * a.cos(), radius * a.sin(), height);
-            let camera_from_table =
-                look_at(eye, target, 0.0).ok_or_else(|| anyhow::anyhow!("degenerate camera"))?;
-            Ok(CameraView {
-                camera_from_table,
-                occlusion_target_met: true,
-            })
+            let camera_from_table = look_at(eye, target, 0.0).ok_or_else(|| anyhow::anyhow!("degenerate camera"))?;
+            Ok(CameraView { camera_from_table, occlusion_target_met: true })
         })
         .collect::<anyhow::Result<_>>()?;
     let noise = NoiseConfig::default();
     let mut render_target = RenderTarget::for_intrinsics(&intrinsics);
     let mut out = Vec::with_capacity(frames);
     for view in 0..frames {
-        let truth = render_view_labelled(
-            &scene,
-            set,
-            view,
-            &intrinsics,
-            &noise,
-            LabelKind::Class,
-            &mut render_target,
-        )?;
+        let truth = render_view_labelled(&scene, set, view, &intrinsics, &noise, LabelKind::Class, &mut render_target)?;
         out.push(VideoFrame {
             rgb: render_target.rgb().to_vec(),
             depth: render_target.depth_u16().to_vec(),
@@ -115,11 +90,7 @@ pub fn render_video(
             truth: truth.objects.iter().map(|o| (o.class_id, o.pose)).collect(),
         });
     }
-    Ok(Video {
-        intrinsics,
-        frames: out,
-        degrees_per_frame,
-    })
+    Ok(Video { intrinsics, frames: out, degrees_per_frame })
 }
 
 /// Frame index of step `i` when playing `len` frames back and forth (0, 1, …, len−1, len−2, …, 1, 0, …).

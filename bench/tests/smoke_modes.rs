@@ -7,10 +7,7 @@ use std::path::PathBuf;
 use std::process::Command;
 
 fn bench(args: &[&str]) -> String {
-    let out = Command::new(env!("CARGO_BIN_EXE_fusepose-bench"))
-        .args(args)
-        .output()
-        .expect("run fusepose-bench");
+    let out = Command::new(env!("CARGO_BIN_EXE_fusepose-bench")).args(args).output().expect("run fusepose-bench");
     let stdout = String::from_utf8_lossy(&out.stdout).into_owned();
     assert!(
         out.status.success(),
@@ -30,10 +27,7 @@ fn weights() -> Option<String> {
     if path.exists() {
         Some(path.display().to_string())
     } else {
-        eprintln!(
-            "SKIPPED: {} is missing (the shipped network weights)",
-            path.display()
-        );
+        eprintln!("SKIPPED: {} is missing (the shipped network weights)", path.display());
         None
     }
 }
@@ -54,18 +48,10 @@ fn row_numbers(text: &str, label: &str) -> Vec<f64> {
 fn transport_smoke_measures_all_four_transports() {
     let out = out_dir("transport");
     let text = bench(&["transport", "--smoke", "--out", out.to_str().unwrap()]);
-    for label in [
-        "iceoryx2, spin-then-wait",
-        "iceoryx2, block on event",
-        "iceoryx2, busy poll",
-        "Unix socket, copy",
-    ] {
+    for label in ["iceoryx2, spin-then-wait", "iceoryx2, block on event", "iceoryx2, busy poll", "Unix socket, copy"] {
         let v = row_numbers(&text, label);
         // n, p50, p99, p99.9, max, lost, CPU
-        assert!(
-            v.len() >= 6 && v[0] > 0.0 && v[1] > 0.0 && v[1] <= v[4],
-            "{label}: {v:?}"
-        );
+        assert!(v.len() >= 6 && v[0] > 0.0 && v[1] > 0.0 && v[1] <= v[4], "{label}: {v:?}");
     }
     assert!(text.contains("ratio p50 Unix socket"), "{text}");
     assert!(out.join("transport.png").exists() && out.join("transport.hlog").exists());
@@ -76,27 +62,12 @@ fn transport_smoke_measures_all_four_transports() {
 fn e2e_smoke_poses_frames_through_daemon_and_consumer() {
     let Some(weights) = weights() else { return };
     let out = out_dir("e2e");
-    let text = bench(&[
-        "e2e",
-        "--smoke",
-        "--fps",
-        "30",
-        "--weights",
-        &weights,
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let text = bench(&["e2e", "--smoke", "--fps", "30", "--weights", &weights, "--out", out.to_str().unwrap()]);
     let v = row_numbers(&text, "30.0");
     // achieved, deadline, sent, posed, skipped, missed, late, degraded, p50, p99, p99.9, max, iters
     assert!(v.len() == 13, "{v:?}");
-    assert!(
-        v[0] > 0.0 && v[3] > 0.0 && v[8] > 0.0 && v[8] <= v[11],
-        "{v:?}"
-    );
-    assert!(
-        text.contains("5.00 objects per message"),
-        "every message poses the 5 labelled objects:\n{text}"
-    );
+    assert!(v[0] > 0.0 && v[3] > 0.0 && v[8] > 0.0 && v[8] <= v[11], "{v:?}");
+    assert!(text.contains("5.00 objects per message"), "every message poses the 5 labelled objects:\n{text}");
     assert!(out.join("e2e.png").exists() && out.join("e2e.hlog").exists());
     let _ = std::fs::remove_dir_all(out);
 }
@@ -105,35 +76,16 @@ fn e2e_smoke_poses_frames_through_daemon_and_consumer() {
 fn tracking_smoke_poses_with_and_without_tracking() {
     let Some(weights) = weights() else { return };
     let out = out_dir("tracking");
-    let text = bench(&[
-        "tracking",
-        "--smoke",
-        "--objects",
-        "1",
-        "--weights",
-        &weights,
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let text = bench(&["tracking", "--smoke", "--objects", "1", "--weights", &weights, "--out", out.to_str().unwrap()]);
     for mode in ["off", "on"] {
         let line = text
             .lines()
             .find(|l| l.split_whitespace().nth(1) == Some(mode))
             .unwrap_or_else(|| panic!("no {mode} row:\n{text}"));
-        let v: Vec<f64> = line
-            .split_whitespace()
-            .filter_map(|w| w.trim_end_matches('%').parse().ok())
-            .collect();
+        let v: Vec<f64> = line.split_whitespace().filter_map(|w| w.trim_end_matches('%').parse().ok()).collect();
         // objects, frames, poses, ms p50, ms p90, CPU ms, poses/s, tracked %, ADD(S) mm, ...
-        assert!(
-            v[2] > 0.0 && v[3] > 0.0 && v[6] > 0.0 && v[8].is_finite(),
-            "{mode}: {v:?}"
-        );
-        assert_eq!(
-            v.last(),
-            Some(&0.0),
-            "{mode}: no allocations per steady-state frame: {line}"
-        );
+        assert!(v[2] > 0.0 && v[3] > 0.0 && v[6] > 0.0 && v[8].is_finite(), "{mode}: {v:?}");
+        assert_eq!(v.last(), Some(&0.0), "{mode}: no allocations per steady-state frame: {line}");
     }
     let _ = std::fs::remove_dir_all(out);
 }

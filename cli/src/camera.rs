@@ -125,7 +125,10 @@ fn replay_bop(ipc: &Ipc, args: &Args, dir: &Path) -> anyhow::Result<()> {
         f.width() == layout.width && f.height() == layout.height && f.depth_unit_m as f32 == layout.depth_scale
     });
     if frames.len() < before {
-        tracing::warn!(skipped = before - frames.len(), "frames with another size or depth unit than the first are skipped");
+        tracing::warn!(
+            skipped = before - frames.len(),
+            "frames with another size or depth unit than the first are skipped"
+        );
     }
     tracing::info!(frames = frames.len(), seconds = t.elapsed().as_secs_f64(), "dataset preloaded");
 
@@ -176,7 +179,13 @@ pub fn synthetic_frame_of(first_seed: u64, views_per_scene: usize, preload: usiz
 }
 
 /// Copies one rendered frame into a loaned sample and sends it.
-fn send_rendered(producer: &mut Producer, k: &fusepose_scene::Intrinsics, rgb: &[u8], depth: &[u16], labels: &[u16]) -> anyhow::Result<()> {
+fn send_rendered(
+    producer: &mut Producer,
+    k: &fusepose_scene::Intrinsics,
+    rgb: &[u8],
+    depth: &[u16],
+    labels: &[u16],
+) -> anyhow::Result<()> {
     let mut w = producer.loan()?;
     w.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
     let planes = w.planes_mut();

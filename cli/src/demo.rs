@@ -104,10 +104,7 @@ impl Role {
             }
             std::thread::sleep(Duration::from_millis(20));
         }
-        eprintln!(
-            "demo: {} did not stop within {grace:?}; killing it",
-            self.name
-        );
+        eprintln!("demo: {} did not stop within {grace:?}; killing it", self.name);
         let _ = self.child.kill();
         self.child.wait().ok()
     }
@@ -156,36 +153,27 @@ fn spawn(
             });
         }
     }
-    let child = cmd
-        .spawn()
-        .with_context(|| format!("starting the {name} ({})", exe.display()))?;
+    let child = cmd.spawn().with_context(|| format!("starting the {name} ({})", exe.display()))?;
     Ok(Role { name, child, log })
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     if !(args.seconds.is_finite() && args.seconds > 0.0) {
-        bail!(
-            "--seconds must be a positive number of seconds, got {}",
-            args.seconds
-        );
+        bail!("--seconds must be a positive number of seconds, got {}", args.seconds);
     }
     if !(args.fps.is_finite() && args.fps > 0.0) {
         bail!("--fps must be positive, got {}", args.fps);
     }
     let interrupted = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, interrupted.clone())
-            .context("installing the signal handler")?;
+        signal_hook::flag::register(signal, interrupted.clone()).context("installing the signal handler")?;
     }
     let exe = std::env::current_exe().context("locating the fusepose executable")?;
     let logs = args.out.join("logs");
     std::fs::create_dir_all(&logs).with_context(|| format!("creating {}", logs.display()))?;
 
     // Private iceoryx2 namespace: its own root directory and resource prefix.
-    let run_dir = tempfile::Builder::new()
-        .prefix("fusepose-demo-")
-        .tempdir()
-        .context("creating the run directory")?;
+    let run_dir = tempfile::Builder::new().prefix("fusepose-demo-").tempdir().context("creating the run directory")?;
     let root = run_dir.path().join("iox2");
     std::fs::create_dir_all(&root)?;
     let root = root.to_string_lossy().into_owned();
@@ -197,8 +185,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(path) => path.clone(),
         None => {
             let path = run_dir.path().join("builtin.safetensors");
-            std::fs::write(&path, BUILTIN_WEIGHTS)
-                .with_context(|| format!("writing {}", path.display()))?;
+            std::fs::write(&path, BUILTIN_WEIGHTS).with_context(|| format!("writing {}", path.display()))?;
             path
         }
     };
@@ -215,15 +202,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut daemon = spawn(
         "daemon",
         &exe,
-        &args_of(&[
-            &"demo-daemon",
-            &"--camera",
-            &CAMERA,
-            &"--estimator",
-            &estimator,
-            &"--weights",
-            &weights.display(),
-        ]),
+        &args_of(&[&"demo-daemon", &"--camera", &CAMERA, &"--estimator", &estimator, &"--weights", &weights.display()]),
         &env,
         Some(logs.join("daemon.log")),
     )?;
@@ -289,11 +268,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let mut died = None;
             for role in [&mut daemon, &mut camera] {
                 if let Ok(Some(status)) = role.child.try_wait() {
-                    died = Some(anyhow::anyhow!(
-                        "the {} exited early ({status}){}",
-                        role.name,
-                        role.log_tail()
-                    ));
+                    died = Some(anyhow::anyhow!("the {} exited early ({status}){}", role.name, role.log_tail()));
                     break;
                 }
             }
@@ -315,17 +290,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         std::process::exit(130);
     }
     if !status.success() {
-        bail!(
-            "the consumer failed ({status}){}{}",
-            daemon.log_tail(),
-            camera.log_tail()
-        );
+        bail!("the consumer failed ({status}){}{}", daemon.log_tail(), camera.log_tail());
     }
     if daemon_status.is_some_and(|s| !s.success() && s.code().is_some()) {
-        eprintln!(
-            "demo: the daemon exited with an error on shutdown{}",
-            daemon.log_tail()
-        );
+        eprintln!("demo: the daemon exited with an error on shutdown{}", daemon.log_tail());
     }
     Ok(())
 }

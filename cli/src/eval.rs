@@ -27,8 +27,8 @@ use std::time::Instant;
 use anyhow::{Context, bail};
 use fusepose_estimator::net::{NetEstimator, NetOptions};
 use fusepose_estimator::{
-    ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
-    Workspace, WorkspaceConfig,
+    ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
+    WorkspaceConfig,
 };
 use fusepose_scene::metrics::{
     BopResult, BopResultsWriter, MetricsRow, MetricsTable, ObjectMetric, plot_accuracy_curves,
@@ -178,10 +178,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut net_masks = match mask_sources.contains(&MaskSource::Net) {
         false => None,
         true => {
-            let weights = args.seg_weights.as_ref().or(args.weights.as_ref()).context(
-                "--masks net needs --weights FILE with an embedded segmenter (or --seg-weights FILE)",
-            )?;
-            Some(NetMasks::load(weights, &objects, args.seg_min_cells, args.seg_max_elongation, args.seg_boundary, args.seg_min_interior)?)
+            let weights = args
+                .seg_weights
+                .as_ref()
+                .or(args.weights.as_ref())
+                .context("--masks net needs --weights FILE with an embedded segmenter (or --seg-weights FILE)")?;
+            Some(NetMasks::load(
+                weights,
+                &objects,
+                args.seg_min_cells,
+                args.seg_max_elongation,
+                args.seg_boundary,
+                args.seg_min_interior,
+            )?)
         }
     };
     let metrics = objects
@@ -250,7 +259,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             serde_json::Value::Object(summaries)
         };
-        std::fs::write(path, serde_json::to_string_pretty(&json)?).with_context(|| format!("writing {}", path.display()))?;
+        std::fs::write(path, serde_json::to_string_pretty(&json)?)
+            .with_context(|| format!("writing {}", path.display()))?;
         println!("wrote {}", path.display());
     }
     if let Some(path) = &args.plot {
@@ -298,7 +308,13 @@ struct Runner {
 }
 
 impl Runner {
-    fn new(kind: EstimatorKind, masks: MaskSource, several_masks: bool, objects: &ObjectSet, args: &Args) -> anyhow::Result<Self> {
+    fn new(
+        kind: EstimatorKind,
+        masks: MaskSource,
+        several_masks: bool,
+        objects: &ObjectSet,
+        args: &Args,
+    ) -> anyhow::Result<Self> {
         let name =
             if several_masks { format!("{}/{}-masks", kind.name(), masks.name()) } else { kind.name().to_string() };
         let num_classes = u16::try_from(objects.len()).context("more than 65535 objects")?;
@@ -360,7 +376,13 @@ impl Runner {
     }
 
     /// Estimates `frame` with instance masks from `labels` (class ids, one per pixel) and scores it.
-    fn evaluate(&mut self, frame: &EvalFrame, labels: &[u16], seed: u64, metrics: &[ObjectMetric]) -> anyhow::Result<()> {
+    fn evaluate(
+        &mut self,
+        frame: &EvalFrame,
+        labels: &[u16],
+        seed: u64,
+        metrics: &[ObjectMetric],
+    ) -> anyhow::Result<()> {
         let view = FrameView {
             intrinsics: frame.intrinsics,
             color_format: ColorFormat::Rgb8,

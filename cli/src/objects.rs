@@ -35,15 +35,13 @@ enum Command {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         Command::List { objects, scale } => {
-            let set = load_object_set(&objects, scale)
-                .with_context(|| format!("loading object set '{objects}'"))?;
+            let set = load_object_set(&objects, scale).with_context(|| format!("loading object set '{objects}'"))?;
             print!("{}", table(&set));
             Ok(())
         }
         Command::Export { dir } => {
             let set = builtin_objects();
-            let info = export_objects(&set, &dir)
-                .with_context(|| format!("exporting to {}", dir.display()))?;
+            let info = export_objects(&set, &dir).with_context(|| format!("exporting to {}", dir.display()))?;
             println!("wrote {} objects and {}", set.len(), info.display());
             Ok(())
         }
@@ -68,17 +66,9 @@ fn describe(symmetry: &Symmetry) -> String {
 
 /// The listing: one line per object, class id first.
 fn table(set: &ObjectSet) -> String {
-    let width = set
-        .objects
-        .iter()
-        .map(|o| o.name.len())
-        .max()
-        .unwrap_or(4)
-        .max(4);
-    let mut out = format!(
-        "{:>5}  {:<width$}  {:>9}  {:>13}  symmetry\n",
-        "class", "name", "triangles", "diameter (mm)"
-    );
+    let width = set.objects.iter().map(|o| o.name.len()).max().unwrap_or(4).max(4);
+    let mut out =
+        format!("{:>5}  {:<width$}  {:>9}  {:>13}  symmetry\n", "class", "name", "triangles", "diameter (mm)");
     for (i, o) in set.objects.iter().enumerate() {
         out += &format!(
             "{:>5}  {:<width$}  {:>9}  {:>13.1}  {}\n",
@@ -103,18 +93,10 @@ mod tests {
         assert_eq!(text.lines().count(), set.len() + 1);
         let cracker = text.lines().find(|l| l.contains("cracker_box")).unwrap();
         assert!(
-            cracker.trim_start().starts_with("1 ")
-                && cracker.contains("270.7")
-                && cracker.ends_with("none"),
+            cracker.trim_start().starts_with("1 ") && cracker.contains("270.7") && cracker.ends_with("none"),
             "{cracker}"
         );
-        assert!(
-            text.lines()
-                .any(|l| l.contains("wood_block") && l.contains("discrete (7 + identity)"))
-        );
-        assert!(
-            text.lines()
-                .any(|l| l.contains("bowl") && l.contains("continuous"))
-        );
+        assert!(text.lines().any(|l| l.contains("wood_block") && l.contains("discrete (7 + identity)")));
+        assert!(text.lines().any(|l| l.contains("bowl") && l.contains("continuous")));
     }
 }

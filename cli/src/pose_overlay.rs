@@ -34,10 +34,8 @@ pub fn write(
         }
         classes.extend((1..seen.len()).filter(|&c| seen[c]).map(|c| c as u16));
     }
-    let drawn: Vec<OverlayObject<'_>> = poses
-        .iter()
-        .filter_map(|(c, p)| objects.by_class(*c).map(|m| OverlayObject::new(m, *c, *p)))
-        .collect();
+    let drawn: Vec<OverlayObject<'_>> =
+        poses.iter().filter_map(|(c, p)| objects.by_class(*c).map(|m| OverlayObject::new(m, *c, *p))).collect();
     overlay::draw_poses(&mut img, k, &drawn, &OverlayStyle::default());
     classes.sort_unstable();
     classes.dedup();

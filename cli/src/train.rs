@@ -106,8 +106,8 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let set = load_object_set(&args.objects, args.scale)
-        .with_context(|| format!("loading object set '{}'", args.objects))?;
+    let set =
+        load_object_set(&args.objects, args.scale).with_context(|| format!("loading object set '{}'", args.objects))?;
     let stage = match args.stage {
         StageArg::Pose => Stage::Pose,
         StageArg::Refine => Stage::Refine,
@@ -122,10 +122,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => Source::Rendered,
     };
     if args.validate_only {
-        let path = args
-            .resume
-            .as_ref()
-            .context("--validate-only needs --resume FILE")?;
+        let path = args.resume.as_ref().context("--validate-only needs --resume FILE")?;
         let v = validate_file(&set, &source, path, args.val_frames, args.val_samples)?;
         println!("{}", fusepose_train::validate::summary(&v));
         return Ok(());
@@ -137,9 +134,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(s) = args.crop {
         config.crop_size = s;
     }
-    config
-        .validate()
-        .map_err(|e| anyhow::anyhow!("network config: {e}"))?;
+    config.validate().map_err(|e| anyhow::anyhow!("network config: {e}"))?;
     if !(0.0..=1.0).contains(&args.min_visible) {
         anyhow::bail!("--min-visible must be in 0..=1, got {}", args.min_visible);
     }
@@ -166,10 +161,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 args.objects,
                 args.seg_masks * 100.0
             ),
-            None => format!(
-                "{} objects, tabletop scenes rendered on the fly with sensor noise",
-                args.objects
-            ),
+            None => format!("{} objects, tabletop scenes rendered on the fly with sensor noise", args.objects),
         } + &format!(", objects >= {:.0} % visible", args.min_visible * 100.0),
         source,
         progress: !args.quiet,

@@ -58,11 +58,7 @@ fn demo_runs_scores_poses_writes_overlays_and_cleans_up() {
     let pid = child.id();
     let run = child.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&run.stdout);
-    assert!(
-        run.status.success(),
-        "demo failed:\n{stdout}\n{}",
-        String::from_utf8_lossy(&run.stderr)
-    );
+    assert!(run.status.success(), "demo failed:\n{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
     assert!(stdout.contains("=== fusepose demo summary"), "{stdout}");
     assert!(stdout.contains("[  1 s]"), "no live line: {stdout}");
 
@@ -70,10 +66,7 @@ fn demo_runs_scores_poses_writes_overlays_and_cleans_up() {
     assert!(summary["pose_messages"].as_u64().unwrap() > 0, "{summary}");
     assert_eq!(summary["invalid"].as_u64(), Some(0), "{summary}");
     let objects = summary["objects"].as_array().unwrap();
-    let all = objects
-        .iter()
-        .find(|o| o["name"] == "ALL")
-        .expect("overall row");
+    let all = objects.iter().find(|o| o["name"] == "ALL").expect("overall row");
     assert!(all["poses"].as_u64().unwrap() > 0);
     // The shipped network is far better than chance on unseen synthetic scenes.
     let median_mm = all["add_s_median_mm"].as_f64().unwrap();
@@ -91,10 +84,7 @@ fn demo_runs_scores_poses_writes_overlays_and_cleans_up() {
 
     assert_eq!(processes_in_group(pid), 0, "children left behind");
     let leftover = shm_with_prefix(&format!("fpdemo{pid}_"));
-    assert!(
-        leftover.is_empty(),
-        "shared memory left behind: {leftover:?}"
-    );
+    assert!(leftover.is_empty(), "shared memory left behind: {leftover:?}");
 }
 
 /// Width and height from a PNG's IHDR chunk.
@@ -123,30 +113,15 @@ fn ctrl_c_stops_every_process_and_removes_shared_memory() {
     while processes_in_group(pid) < 4 && t0.elapsed() < Duration::from_secs(30) {
         std::thread::sleep(Duration::from_millis(100));
     }
-    assert_eq!(
-        processes_in_group(pid),
-        4,
-        "demo + daemon + camera + consumer"
-    );
+    assert_eq!(processes_in_group(pid), 4, "demo + daemon + camera + consumer");
     std::thread::sleep(Duration::from_secs(2));
     // SAFETY: kill(2) on the process group this test created: what Ctrl-C does.
     unsafe { libc::kill(-(pid as i32), libc::SIGINT) };
     let output = demo.wait_with_output().unwrap();
     let stdout = String::from_utf8_lossy(&output.stdout);
-    assert_eq!(
-        output.status.code(),
-        Some(130),
-        "{stdout}\n{}",
-        String::from_utf8_lossy(&output.stderr)
-    );
-    assert!(
-        stdout.contains("=== fusepose demo summary"),
-        "summary still printed: {stdout}"
-    );
+    assert_eq!(output.status.code(), Some(130), "{stdout}\n{}", String::from_utf8_lossy(&output.stderr));
+    assert!(stdout.contains("=== fusepose demo summary"), "summary still printed: {stdout}");
     assert_eq!(processes_in_group(pid), 0, "children left behind");
     let leftover = shm_with_prefix(&format!("fpdemo{pid}_"));
-    assert!(
-        leftover.is_empty(),
-        "shared memory left behind: {leftover:?}"
-    );
+    assert!(leftover.is_empty(), "shared memory left behind: {leftover:?}");
 }

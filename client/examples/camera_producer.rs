@@ -17,9 +17,7 @@
 
 use std::time::Duration;
 
-use fusepose_client::{
-    ColorFormat, DepthFormat, DepthMut, FrameLayout, Ipc, IpcOptions, Producer, monotonic_ns,
-};
+use fusepose_client::{ColorFormat, DepthFormat, DepthMut, FrameLayout, Ipc, IpcOptions, Producer, monotonic_ns};
 
 /// Pinhole intrinsics of the colour camera, pixels (depth registered to colour).
 struct Intrinsics {
@@ -50,25 +48,16 @@ fn main() -> anyhow::Result<()> {
         depth_scale: 0.001, // one depth unit = 1 mm
         labels: None,       // let the daemon segment
     };
-    let k = Intrinsics {
-        fx: 615.0,
-        fy: 615.0,
-        cx: 319.5,
-        cy: 239.5,
-    };
+    let k = Intrinsics { fx: 615.0, fy: 615.0, cx: 319.5, cy: 239.5 };
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("camera_producer"))?;
     let mut producer = Producer::create(&ipc, "cam0", layout)?;
     let period = Duration::from_secs_f64(1.0 / 30.0);
     for n in 0.. {
         let mut frame = producer.loan()?;
         let planes = frame.planes_mut();
-        let DepthMut::U16(depth) = planes.depth else {
-            unreachable!("the layout asks for u16 depth")
-        };
+        let DepthMut::U16(depth) = planes.depth else { unreachable!("the layout asks for u16 depth") };
         let captured = grab_frame(n, planes.color, depth, layout.width as usize);
-        frame
-            .set_capture_time_ns(captured)
-            .set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+        frame.set_capture_time_ns(captured).set_intrinsics(k.fx, k.fy, k.cx, k.cy);
         let sequence = frame.send()?;
         if sequence % 30 == 0 {
             println!("sent frame {sequence}");

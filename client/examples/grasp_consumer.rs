@@ -26,7 +26,11 @@ fn main() -> anyhow::Result<()> {
             let [x, y, z] = o.translation_m;
             println!(
                 "frame {}: grasp class {} at ({x:.3}, {y:.3}, {z:.3}) m, q {:?}, conf {:.2}, capture→publish {:.1} ms",
-                msg.frame_sequence, o.class_id, o.quaternion, o.confidence, msg.latency_ns() as f64 / 1e6
+                msg.frame_sequence,
+                o.class_id,
+                o.quaternion,
+                o.confidence,
+                msg.latency_ns() as f64 / 1e6
             );
         }
     }

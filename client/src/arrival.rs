@@ -36,14 +36,10 @@ pub enum WaitStrategy {
 
 impl WaitStrategy {
     /// Spin-then-wait with a 200 µs margin: about 1.2 % of a core at 30 Hz.
-    pub const DEFAULT_SPIN: Self = Self::SpinNearArrival {
-        margin: Duration::from_micros(200),
-    };
+    pub const DEFAULT_SPIN: Self = Self::SpinNearArrival { margin: Duration::from_micros(200) };
 
     /// The client's default: spin-then-wait (200 µs) on a pinned thread, else block.
-    pub const DEFAULT: Self = Self::SpinIfPinned {
-        margin: Duration::from_micros(200),
-    };
+    pub const DEFAULT: Self = Self::SpinIfPinned { margin: Duration::from_micros(200) };
 
     /// Replaces [`WaitStrategy::SpinIfPinned`] by what applies to the calling
     /// thread now; other strategies are returned as they are.
@@ -195,9 +191,7 @@ impl ArrivalPredictor {
                 let early_ns = margin_ns + self.wake_delay_ns();
                 match self.next_arrival_ns(now_ns, margin_ns) {
                     None => WaitPlan::Block,
-                    Some(next) if now_ns + early_ns < next => {
-                        WaitPlan::BlockUntil(next - early_ns)
-                    }
+                    Some(next) if now_ns + early_ns < next => WaitPlan::BlockUntil(next - early_ns),
                     Some(next) => WaitPlan::SpinUntil(next + margin_ns),
                 }
             }
@@ -242,9 +236,7 @@ mod tests {
     use super::*;
 
     const MS: u64 = 1_000_000;
-    const SPIN: WaitStrategy = WaitStrategy::SpinNearArrival {
-        margin: Duration::from_micros(200),
-    };
+    const SPIN: WaitStrategy = WaitStrategy::SpinNearArrival { margin: Duration::from_micros(200) };
 
     #[test]
     fn learns_a_steady_period_and_ignores_a_skipped_message() {
@@ -263,25 +255,13 @@ mod tests {
         assert_eq!(p.plan(SPIN, 0), WaitPlan::Block, "no period yet");
         p.observe(100 * MS);
         p.observe(110 * MS);
-        assert_eq!(
-            p.plan(SPIN, 111 * MS),
-            WaitPlan::BlockUntil(120 * MS - 200_000)
-        );
-        assert_eq!(
-            p.plan(SPIN, 120 * MS - 100_000),
-            WaitPlan::SpinUntil(120 * MS + 200_000)
-        );
+        assert_eq!(p.plan(SPIN, 111 * MS), WaitPlan::BlockUntil(120 * MS - 200_000));
+        assert_eq!(p.plan(SPIN, 120 * MS - 100_000), WaitPlan::SpinUntil(120 * MS + 200_000));
         // Late: the next slot of the grid.
-        assert_eq!(
-            p.plan(SPIN, 121 * MS),
-            WaitPlan::BlockUntil(130 * MS - 200_000)
-        );
+        assert_eq!(p.plan(SPIN, 121 * MS), WaitPlan::BlockUntil(130 * MS - 200_000));
         assert_eq!(p.plan(WaitStrategy::Block, 121 * MS), WaitPlan::Block);
         assert_eq!(p.jitter_ns(), 0, "a steady sender has no jitter");
-        assert_eq!(
-            p.plan(WaitStrategy::BusyPoll, 121 * MS),
-            WaitPlan::SpinUntil(u64::MAX)
-        );
+        assert_eq!(p.plan(WaitStrategy::BusyPoll, 121 * MS), WaitPlan::SpinUntil(u64::MAX));
     }
 
     #[test]

@@ -111,7 +111,13 @@ impl Consumer {
             port: "listener",
             detail: format!("{e:?}"),
         })?;
-        Ok(Self { services, subscriber, listener, strategy: WaitStrategy::DEFAULT, predictor: ArrivalPredictor::default() })
+        Ok(Self {
+            services,
+            subscriber,
+            listener,
+            strategy: WaitStrategy::DEFAULT,
+            predictor: ArrivalPredictor::default(),
+        })
     }
 
     /// How [`Consumer::wait`] and [`Consumer::wait_ready`] wait (default [`WaitStrategy::DEFAULT`]: spin-then-wait when the thread is pinned to one CPU, else block).
@@ -176,9 +182,12 @@ impl Consumer {
     /// takes nothing (use [`Consumer::latest`] or [`Consumer::drain`]).
     pub fn wait_ready(&mut self, timeout: Duration) -> Result<bool, ClientError> {
         let subscriber = &self.subscriber;
-        wait_for_samples(&self.listener, || subscriber.has_samples(), &mut self.predictor, self.strategy, timeout).map_err(
-            |(operation, detail)| ClientError::Transfer { service: self.services.poses_name.clone(), operation, detail },
-        )
+        wait_for_samples(&self.listener, || subscriber.has_samples(), &mut self.predictor, self.strategy, timeout)
+            .map_err(|(operation, detail)| ClientError::Transfer {
+                service: self.services.poses_name.clone(),
+                operation,
+                detail,
+            })
     }
 }
 

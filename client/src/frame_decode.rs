@@ -2,10 +2,11 @@
 //! length is checked against the payload slice before any plane is borrowed.
 //! Never reads outside the slice, never panics, never allocates.
 
-use crate::frame_header::{
-    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE, PlaneRef,
-};
 use crate::InvalidReason;
+use crate::frame_header::{
+    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE,
+    PlaneRef,
+};
 
 /// Depth values borrowed from the payload.
 #[derive(Clone, Copy, Debug)]
@@ -98,7 +99,8 @@ fn plane_bytes<'a>(
     at: PlaneRef,
     expected_len: u64,
 ) -> Result<&'a [u8], FrameRejection> {
-    let out_of_bounds = FrameRejection::PlaneOutOfBounds { plane, offset: at.offset, len: at.len, payload_len: payload.len() };
+    let out_of_bounds =
+        FrameRejection::PlaneOutOfBounds { plane, offset: at.offset, len: at.len, payload_len: payload.len() };
     let end = at.offset.checked_add(at.len).ok_or(out_of_bounds)?;
     if end > payload.len() as u64 {
         return Err(out_of_bounds);
@@ -110,7 +112,11 @@ fn plane_bytes<'a>(
     Ok(&payload[at.offset as usize..end as usize])
 }
 
-fn cast_plane<'a, T: bytemuck::Pod>(bytes: &'a [u8], plane: &'static str, offset: u64) -> Result<&'a [T], FrameRejection> {
+fn cast_plane<'a, T: bytemuck::Pod>(
+    bytes: &'a [u8],
+    plane: &'static str,
+    offset: u64,
+) -> Result<&'a [T], FrameRejection> {
     bytemuck::try_cast_slice(bytes).map_err(|_| FrameRejection::PlaneMisaligned {
         plane,
         offset,
@@ -167,7 +173,13 @@ pub fn decode_frame<'a>(
         return Err(FrameRejection::BadFocalLength { fx: h.fx, fy: h.fy });
     }
     let (w, hgt) = (h.width as f64, h.height as f64);
-    if !(h.cx.is_finite() && h.cx >= -0.5 * w && h.cx <= 1.5 * w && h.cy.is_finite() && h.cy >= -0.5 * hgt && h.cy <= 1.5 * hgt) {
+    if !(h.cx.is_finite()
+        && h.cx >= -0.5 * w
+        && h.cx <= 1.5 * w
+        && h.cy.is_finite()
+        && h.cy >= -0.5 * hgt
+        && h.cy <= 1.5 * hgt)
+    {
         return Err(FrameRejection::BadPrincipalPoint { cx: h.cx, cy: h.cy });
     }
     if !(h.depth_scale.is_finite() && h.depth_scale > 0.0) {
@@ -198,7 +210,9 @@ pub fn decode_frame<'a>(
     let color = plane_bytes(payload, "colour", h.color, pixels * 3)?;
     let depth_bytes = plane_bytes(payload, "depth", h.depth, pixels * depth_format.bytes_per_pixel() as u64)?;
     let depth = match depth_format {
-        DepthFormat::U16 => DepthData::U16 { data: cast_plane(depth_bytes, "depth", h.depth.offset)?, scale: h.depth_scale },
+        DepthFormat::U16 => {
+            DepthData::U16 { data: cast_plane(depth_bytes, "depth", h.depth.offset)?, scale: h.depth_scale }
+        }
         DepthFormat::F32 => DepthData::F32(cast_plane(depth_bytes, "depth", h.depth.offset)?),
     };
     if overlaps(h.color, h.depth) {

@@ -173,7 +173,9 @@ impl FrameLayout {
         let depth =
             PlaneRef { offset: align8(color.len), len: self.pixels() * self.depth_format.bytes_per_pixel() as u64 };
         let labels = match self.labels {
-            Some(f) => PlaneRef { offset: align8(depth.offset + depth.len), len: self.pixels() * f.bytes_per_pixel() as u64 },
+            Some(f) => {
+                PlaneRef { offset: align8(depth.offset + depth.len), len: self.pixels() * f.bytes_per_pixel() as u64 }
+            }
             None => PlaneRef::default(),
         };
         [color, depth, labels]

@@ -22,13 +22,14 @@ mod producer;
 mod services;
 mod stats;
 
-pub use clock::monotonic_ns;
 pub use arrival::{ArrivalPredictor, WaitPlan, WaitStrategy, poll_until};
+pub use clock::monotonic_ns;
 pub use consumer::{Consumer, StatsClient, wait_for_samples};
 pub use error::ClientError;
 pub use frame_decode::{DepthData, FramePlanes, FrameRejection, LabelData, decode_frame};
 pub use frame_header::{
-    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE, PlaneRef,
+    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE,
+    PlaneRef,
 };
 pub use ipc_context::{Ipc, IpcOptions};
 pub use pose_message::{InvalidReason, MAX_OBJECTS, PoseMessage, PoseStatus, WireObjectPose};

@@ -92,9 +92,12 @@ impl Producer {
     /// Loans the next frame in shared memory; the header is filled from the
     /// layout, the sequence and the current time (override with the setters).
     pub fn loan(&mut self) -> Result<FrameWriter<'_>, ClientError> {
-        let mut sample = self.publisher.loan_slice_uninit(self.layout.payload_len()).map_err(|e| {
-            ClientError::Transfer { service: self.services.frames_name.clone(), operation: "loan", detail: format!("{e:?}") }
-        })?;
+        let mut sample =
+            self.publisher.loan_slice_uninit(self.layout.payload_len()).map_err(|e| ClientError::Transfer {
+                service: self.services.frames_name.clone(),
+                operation: "loan",
+                detail: format!("{e:?}"),
+            })?;
         let mut header = self.layout.header(self.services.camera_id);
         header.sequence = self.next_sequence;
         header.capture_time_ns = monotonic_ns();

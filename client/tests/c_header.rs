@@ -78,19 +78,10 @@ fn constants() -> Vec<(&'static str, u64)> {
         ("FUSEPOSE_LABELS_U8", LabelFormat::U8 as u64),
         ("FUSEPOSE_LABELS_U16", LabelFormat::U16 as u64),
         ("FUSEPOSE_STATUS_OK", PoseStatus::OK as u64),
-        (
-            "FUSEPOSE_STATUS_INVALID_FRAME",
-            PoseStatus::INVALID_FRAME as u64,
-        ),
-        (
-            "FUSEPOSE_STATUS_DEADLINE_MISSED",
-            PoseStatus::DEADLINE_MISSED as u64,
-        ),
+        ("FUSEPOSE_STATUS_INVALID_FRAME", PoseStatus::INVALID_FRAME as u64),
+        ("FUSEPOSE_STATUS_DEADLINE_MISSED", PoseStatus::DEADLINE_MISSED as u64),
         ("FUSEPOSE_STATUS_DEGRADED", PoseStatus::DEGRADED as u64),
-        (
-            "FUSEPOSE_STATUS_ESTIMATOR_FAILED",
-            PoseStatus::ESTIMATOR_FAILED as u64,
-        ),
+        ("FUSEPOSE_STATUS_ESTIMATOR_FAILED", PoseStatus::ESTIMATOR_FAILED as u64),
         ("FUSEPOSE_STAGE_INGEST", Stage::Ingest as u64),
         ("FUSEPOSE_STAGE_SEGMENTATION", Stage::Segmentation as u64),
         ("FUSEPOSE_STAGE_SAMPLING", Stage::Sampling as u64),
@@ -109,36 +100,20 @@ fn source_fields(file: &str, name: &str) -> Vec<String> {
     let path = client_dir().join("src").join(file);
     let text = std::fs::read_to_string(&path).unwrap_or_else(|e| panic!("{}: {e}", path.display()));
     let start = format!("pub struct {name} {{");
-    let body = text
-        .split_once(&start)
-        .unwrap_or_else(|| panic!("{start} not found in {}", path.display()))
-        .1;
-    let body = body
-        .split_once("\n}")
-        .expect("struct body ends with a closing brace at column 0")
-        .0;
+    let body = text.split_once(&start).unwrap_or_else(|| panic!("{start} not found in {}", path.display())).1;
+    let body = body.split_once("\n}").expect("struct body ends with a closing brace at column 0").0;
     body.lines()
-        .filter_map(|l| {
-            l.trim()
-                .strip_prefix("pub ")?
-                .split_once(':')
-                .map(|(f, _)| f.trim().to_owned())
-        })
+        .filter_map(|l| l.trim().strip_prefix("pub ")?.split_once(':').map(|(f, _)| f.trim().to_owned()))
         .collect()
 }
 
 /// The C compiler, or `None` (test skipped) when there is none.
 fn c_compiler() -> Option<String> {
-    let cc = std::env::var("CC")
-        .ok()
-        .filter(|c| !c.is_empty())
-        .unwrap_or_else(|| "cc".to_owned());
+    let cc = std::env::var("CC").ok().filter(|c| !c.is_empty()).unwrap_or_else(|| "cc".to_owned());
     match Command::new(&cc).arg("--version").output() {
         Ok(o) if o.status.success() => Some(cc),
         _ => {
-            eprintln!(
-                "SKIPPED: no C compiler ({cc:?}); install one (e.g. `apt-get install gcc`) to check fusepose.h"
-            );
+            eprintln!("SKIPPED: no C compiler ({cc:?}); install one (e.g. `apt-get install gcc`) to check fusepose.h");
             None
         }
     }
@@ -155,25 +130,13 @@ fn compile(cc: &str, dir: &Path, name: &str, sources: &[PathBuf]) -> PathBuf {
         .arg(&exe)
         .output()
         .expect("running the C compiler");
-    assert!(
-        out.status.success(),
-        "C compile failed (header out of date?):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+    assert!(out.status.success(), "C compile failed (header out of date?):\n{}", String::from_utf8_lossy(&out.stderr));
     exe
 }
 
 fn run(exe: &Path, args: &[&Path]) -> String {
-    let out = Command::new(exe)
-        .args(args)
-        .output()
-        .expect("running the C program");
-    assert!(
-        out.status.success(),
-        "{} failed: {}",
-        exe.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
+    let out = Command::new(exe).args(args).output().expect("running the C program");
+    assert!(out.status.success(), "{} failed: {}", exe.display(), String::from_utf8_lossy(&out.stderr));
     String::from_utf8(out.stdout).expect("utf-8 output")
 }
 
@@ -188,12 +151,7 @@ fn rust_field_lists_match_the_source() {
             l.rust
         );
         // No padding: every byte of a wire type is a field's.
-        assert_eq!(
-            l.fields.iter().map(|f| f.2).sum::<usize>(),
-            l.size,
-            "{} has padding",
-            l.rust
-        );
+        assert_eq!(l.fields.iter().map(|f| f.2).sum::<usize>(), l.size, "{} has padding", l.rust);
     }
 }
 
@@ -216,11 +174,7 @@ fn c_header_matches_rust_layouts_and_constants() {
         }
     }
     for (name, value) in constants() {
-        writeln!(
-            program,
-            "    printf(\"{name} %llu\\n\", (unsigned long long)({name}));"
-        )
-        .unwrap();
+        writeln!(program, "    printf(\"{name} %llu\\n\", (unsigned long long)({name}));").unwrap();
         writeln!(expected, "{name} {value}").unwrap();
     }
     program.push_str("    return 0;\n}\n");
@@ -229,10 +183,7 @@ fn c_header_matches_rust_layouts_and_constants() {
     let exe = compile(&cc, dir.path(), "layout", &[source]);
     let got = run(&exe, &[]);
     for (g, e) in got.lines().zip(expected.lines()) {
-        assert_eq!(
-            g, e,
-            "C (left) and Rust (right) disagree: update client/include/fusepose.h"
-        );
+        assert_eq!(g, e, "C (left) and Rust (right) disagree: update client/include/fusepose.h");
     }
     assert_eq!(got.lines().count(), expected.lines().count());
 }
@@ -261,20 +212,11 @@ fn c_example_parses_a_pose_message_written_by_rust() {
         translation_m: [0.0125, -0.25, 0.875],
         ..WireObjectPose::default()
     };
-    msg.objects[1] = WireObjectPose {
-        class_id: 7,
-        instance_id: 1,
-        translation_m: [0.1, 0.2, 1.5],
-        ..msg.objects[0]
-    };
+    msg.objects[1] = WireObjectPose { class_id: 7, instance_id: 1, translation_m: [0.1, 0.2, 1.5], ..msg.objects[0] };
     // SAFETY: PoseMessage is #[repr(C)], Copy and has no padding (checked by
     // `rust_field_lists_match_the_source`), so all its bytes are initialised.
-    let bytes = unsafe {
-        std::slice::from_raw_parts(
-            (&msg as *const PoseMessage).cast::<u8>(),
-            size_of::<PoseMessage>(),
-        )
-    };
+    let bytes =
+        unsafe { std::slice::from_raw_parts((&msg as *const PoseMessage).cast::<u8>(), size_of::<PoseMessage>()) };
     let file = dir.path().join("poses.bin");
     let mut two = bytes.to_vec();
     two.extend_from_slice(bytes);
@@ -282,29 +224,16 @@ fn c_example_parses_a_pose_message_written_by_rust() {
 
     let out = run(&exe, &[&file]);
     let lines: Vec<&str> = out.lines().collect();
-    assert_eq!(
-        lines[0], "frame 4242 status 0x1 objects 2 latency 12.500 ms",
-        "{out}"
-    );
-    assert_eq!(
-        lines[1],
-        "  class 3 instance 0 xyz_mm 12.5 -250.0 875.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75"
-    );
-    assert_eq!(
-        lines[2],
-        "  class 7 instance 1 xyz_mm 100.0 200.0 1500.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75"
-    );
+    assert_eq!(lines[0], "frame 4242 status 0x1 objects 2 latency 12.500 ms", "{out}");
+    assert_eq!(lines[1], "  class 3 instance 0 xyz_mm 12.5 -250.0 875.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75");
+    assert_eq!(lines[2], "  class 7 instance 1 xyz_mm 100.0 200.0 1500.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75");
     assert_eq!(lines.last(), Some(&"2 messages"));
 
     // A message of another wire version is refused.
     msg.format_version = WIRE_VERSION + 1;
     // SAFETY: as above.
-    let bytes = unsafe {
-        std::slice::from_raw_parts(
-            (&msg as *const PoseMessage).cast::<u8>(),
-            size_of::<PoseMessage>(),
-        )
-    };
+    let bytes =
+        unsafe { std::slice::from_raw_parts((&msg as *const PoseMessage).cast::<u8>(), size_of::<PoseMessage>()) };
     std::fs::write(&file, bytes).unwrap();
     let out = Command::new(&exe).arg(&file).output().unwrap();
     assert!(!out.status.success());

@@ -42,9 +42,11 @@ pub struct CameraPorts {
 impl CameraPorts {
     pub fn open(ipc: &Ipc, camera: &str) -> anyhow::Result<Self> {
         let services = CameraServices::open(ipc, camera)?;
-        let port = |what: &str, e: &dyn std::fmt::Debug| anyhow::anyhow!("camera {camera}: cannot create {what}: {e:?}");
+        let port =
+            |what: &str, e: &dyn std::fmt::Debug| anyhow::anyhow!("camera {camera}: cannot create {what}: {e:?}");
         let frames = services.frames.subscriber_builder().create().map_err(|e| port("frame subscriber", &e))?;
-        let frame_listener = services.frame_events.listener_builder().create().map_err(|e| port("frame listener", &e))?;
+        let frame_listener =
+            services.frame_events.listener_builder().create().map_err(|e| port("frame listener", &e))?;
         let poses = services.poses.publisher_builder().create().map_err(|e| port("pose publisher", &e))?;
         let pose_notifier = services.pose_events.notifier_builder().create().map_err(|e| port("pose notifier", &e))?;
         let stats = services.stats.server_builder().create().map_err(|e| port("stats server", &e))?;
@@ -106,7 +108,10 @@ fn content_reason(e: &FrameError) -> InvalidReason {
 fn check_capture_time(capture_ns: u64, received_ns: u64) -> Result<(), (InvalidReason, String)> {
     if capture_ns > received_ns.saturating_add(MAX_CAPTURE_AHEAD_NS) {
         let ahead = (capture_ns - received_ns) as f64 / 1e6;
-        return Err((InvalidReason::CaptureInFuture, format!("capture time {ahead:.3} ms ahead of the daemon's clock")));
+        return Err((
+            InvalidReason::CaptureInFuture,
+            format!("capture time {ahead:.3} ms ahead of the daemon's clock"),
+        ));
     }
     let age = received_ns.saturating_sub(capture_ns);
     if age > MAX_CAPTURE_AGE_NS {
@@ -205,9 +210,15 @@ impl CameraState {
     }
 
     /// Sequence and capture-time checks of a decoded frame.
-    fn check_stream(&self, sequence: SequenceEvent, header: &FrameHeader, received_ns: u64) -> Result<(), (InvalidReason, String)> {
+    fn check_stream(
+        &self,
+        sequence: SequenceEvent,
+        header: &FrameHeader,
+        received_ns: u64,
+    ) -> Result<(), (InvalidReason, String)> {
         if let SequenceEvent::Regression { last } = sequence {
-            let detail = format!("sequence {} after {last} from the same publisher (repeated or backwards)", header.sequence);
+            let detail =
+                format!("sequence {} after {last} from the same publisher (repeated or backwards)", header.sequence);
             return Err((InvalidReason::SequenceRegression, detail));
         }
         check_capture_time(header.capture_time_ns, received_ns)
@@ -215,15 +226,23 @@ impl CameraState {
 
     /// Runs the engine on a checked frame and fills `msg`; returns whether
     /// the frame counts as processed (OK or estimator failure, not refused).
-    fn estimate(&mut self, view: &fusepose_estimator::FrameView<'_>, header: &FrameHeader, msg: &mut PoseMessage, times: &mut StageTimes) -> bool {
+    fn estimate(
+        &mut self,
+        view: &fusepose_estimator::FrameView<'_>,
+        header: &FrameHeader,
+        msg: &mut PoseMessage,
+        times: &mut StageTimes,
+    ) -> bool {
         // The estimator fits its work into what is left of the deadline (minus the publish step).
         const PUBLISH_MARGIN_NS: u64 = 300_000;
-        let left_ns = header.capture_time_ns.saturating_add(self.deadline_ns).saturating_sub(monotonic_ns() + PUBLISH_MARGIN_NS);
+        let left_ns =
+            header.capture_time_ns.saturating_add(self.deadline_ns).saturating_sub(monotonic_ns() + PUBLISH_MARGIN_NS);
         self.engine.set_deadline(Some(std::time::Instant::now() + std::time::Duration::from_nanos(left_ns)));
         // A panic inside the estimator on odd input must not take the daemon down.
         let engine = &mut self.engine;
-        let outcome = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| engine.run(view, header.sequence, times)))
-            .unwrap_or(Err(EngineFailure::Panicked));
+        let outcome =
+            std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| engine.run(view, header.sequence, times)))
+                .unwrap_or(Err(EngineFailure::Panicked));
         match outcome {
             Ok(()) => {
                 let poses = self.engine.poses();
@@ -244,7 +263,8 @@ impl CameraState {
                 }
                 if non_finite > 0 {
                     self.counters.poses_non_finite += non_finite as u64;
-                    msg.status = if finite > 0 { msg.status | PoseStatus::DEGRADED } else { PoseStatus::ESTIMATOR_FAILED };
+                    msg.status =
+                        if finite > 0 { msg.status | PoseStatus::DEGRADED } else { PoseStatus::ESTIMATOR_FAILED };
                     if finite == 0 {
                         self.counters.estimator_failures += 1;
                     }

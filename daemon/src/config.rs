@@ -192,7 +192,13 @@ impl Default for StatsConfig {
 
 impl Default for IpcConfig {
     fn default() -> Self {
-        Self { root_path: PathBuf::new(), prefix: String::new(), cleanup_interval_s: 5.0, tick_ms: 20, receive_spin_us: 200 }
+        Self {
+            root_path: PathBuf::new(),
+            prefix: String::new(),
+            cleanup_interval_s: 5.0,
+            tick_ms: 20,
+            receive_spin_us: 200,
+        }
     }
 }
 
@@ -214,7 +220,8 @@ fn invalid(key: &'static str, value: impl std::fmt::Debug, rule: &'static str) -
 impl DaemonConfig {
     /// Reads and checks a configuration file.
     pub fn load(path: &Path) -> Result<Self, ConfigError> {
-        let text = std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
+        let text =
+            std::fs::read_to_string(path).map_err(|source| ConfigError::Read { path: path.to_owned(), source })?;
         Self::parse(&text).map_err(|e| match e {
             ConfigError::Parse { message, .. } => ConfigError::Parse { path: path.to_owned(), message },
             other => other,
@@ -223,8 +230,8 @@ impl DaemonConfig {
 
     /// Parses and checks configuration text.
     pub fn parse(text: &str) -> Result<Self, ConfigError> {
-        let config: Self =
-            toml::from_str(text).map_err(|e| ConfigError::Parse { path: PathBuf::from("<text>"), message: e.to_string() })?;
+        let config: Self = toml::from_str(text)
+            .map_err(|e| ConfigError::Parse { path: PathBuf::from("<text>"), message: e.to_string() })?;
         config.validate()?;
         Ok(config)
     }
@@ -265,7 +272,11 @@ impl DaemonConfig {
             return Err(invalid("estimator.join_parts", e.join_parts, "must be in 0..=4 (0 = off)"));
         }
         if e.seg_boundary.parse::<fusepose_estimator::seg::Boundary>().is_err() {
-            return Err(invalid("estimator.seg_boundary", &e.seg_boundary, "must be refine:N (N in 0..=255), erode-cells or cells"));
+            return Err(invalid(
+                "estimator.seg_boundary",
+                &e.seg_boundary,
+                "must be refine:N (N in 0..=255), erode-cells or cells",
+            ));
         }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
@@ -275,7 +286,11 @@ impl DaemonConfig {
         }
         let t = &e.tracking;
         if !(t.max_fit_mm.is_finite() && t.max_fit_mm > 0.0) {
-            return Err(invalid("estimator.tracking.max_fit_mm", t.max_fit_mm, "must be a positive number of millimetres"));
+            return Err(invalid(
+                "estimator.tracking.max_fit_mm",
+                t.max_fit_mm,
+                "must be a positive number of millimetres",
+            ));
         }
         if t.full_estimate_every == 0 {
             return Err(invalid("estimator.tracking.full_estimate_every", t.full_estimate_every, "must be at least 1"));

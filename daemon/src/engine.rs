@@ -9,8 +9,8 @@ use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions};
 use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile};
 use fusepose_estimator::{
-    EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
-    WorkspaceConfig,
+    EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
+    Workspace, WorkspaceConfig,
 };
 use fusepose_scene::ObjectSet;
 
@@ -65,7 +65,8 @@ fn workspace_config(config: &EstimatorConfig, objects: &ObjectSet) -> WorkspaceC
 /// The ICP baseline over `objects` (its own defaults; `refine_iterations` is the network refiner's).
 fn icp_factory(objects: Arc<ObjectSet>) -> EstimatorFactory {
     Box::new(move || {
-        let icp = IcpEstimator::new(&objects, IcpConfig::default()).map_err(|e| anyhow::anyhow!("estimator (icp): {e}"))?;
+        let icp =
+            IcpEstimator::new(&objects, IcpConfig::default()).map_err(|e| anyhow::anyhow!("estimator (icp): {e}"))?;
         Ok(Box::new(icp) as Box<dyn Estimator>)
     })
 }
@@ -75,7 +76,8 @@ fn icp_factory(objects: Arc<ObjectSet>) -> EstimatorFactory {
 /// error, a file without one is not); `net` requires one.
 fn segmenter(config: &EstimatorConfig, objects: &ObjectSet) -> anyhow::Result<Option<Arc<SegFile>>> {
     let weights = config.weights.display().to_string();
-    let error = |e: NetLoadError| anyhow::anyhow!("estimator.masks = {:?}, estimator.weights = {weights:?}: {e}", config.masks);
+    let error =
+        |e: NetLoadError| anyhow::anyhow!("estimator.masks = {:?}, estimator.weights = {weights:?}: {e}", config.masks);
     match config.masks {
         MaskSource::Labels => Ok(None),
         MaskSource::Auto if !config.weights.exists() => Ok(None),
@@ -99,7 +101,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.segmenter = segmenter(config, &objects)?;
         // Checked by the config's validation; a bad value there is an error, not this default.
-        spec.seg_boundary = config.seg_boundary.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_boundary: {e}"))?;
+        spec.seg_boundary =
+            config.seg_boundary.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_boundary: {e}"))?;
         spec.masks = config.masks;
         if let Some(seg) = &spec.segmenter {
             spec.description += &format!(
@@ -171,7 +174,8 @@ fn net_options(config: &EstimatorConfig) -> NetOptions {
 /// The fusion network from `estimator.weights`, checked against the object set now.
 fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<EngineSpec> {
     let options = || net_options(config);
-    let weights_error = |e: NetLoadError| anyhow::anyhow!("estimator.weights = {:?}: {e}", config.weights.display().to_string());
+    let weights_error =
+        |e: NetLoadError| anyhow::anyhow!("estimator.weights = {:?}: {e}", config.weights.display().to_string());
     let probe = NetEstimator::load(&config.weights, &objects, options()).map_err(weights_error)?;
     let workspace = WorkspaceConfig { min_pixels: config.min_pixels, ..probe.workspace_config(config.max_instances) };
     if (workspace.num_points, workspace.crop_size) != (config.num_points, config.crop_size) {
@@ -181,7 +185,12 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
             "estimator.num_points / crop_size replaced by the sizes the network was trained with"
         );
     }
-    let description = format!("net ({}, {} objects, {} refine iterations)", config.weights.display(), objects.len(), config.refine_iterations);
+    let description = format!(
+        "net ({}, {} objects, {} refine iterations)",
+        config.weights.display(),
+        objects.len(),
+        config.refine_iterations
+    );
     // The probe serves the first camera; further cameras load their own copy.
     let first = std::sync::Mutex::new(Some(probe));
     let (path, later_options) = (config.weights.clone(), net_options(config));
@@ -189,7 +198,8 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         if let Some(net) = first.lock().ok().and_then(|mut f| f.take()) {
             return Ok(Box::new(net) as Box<dyn Estimator>);
         }
-        let net = NetEstimator::load(&path, &objects, later_options).map_err(|e| anyhow::anyhow!("estimator.weights: {e}"))?;
+        let net = NetEstimator::load(&path, &objects, later_options)
+            .map_err(|e| anyhow::anyhow!("estimator.weights: {e}"))?;
         Ok(Box::new(net) as Box<dyn Estimator>)
     });
     Ok(EngineSpec {
@@ -273,7 +283,11 @@ impl PoseEngine {
     }
 
     /// An engine around a given estimator (tests, embedding).
-    pub fn with_estimator(estimator: Box<dyn Estimator>, workspace: WorkspaceConfig, estimate_stage: Stage) -> anyhow::Result<Self> {
+    pub fn with_estimator(
+        estimator: Box<dyn Estimator>,
+        workspace: WorkspaceConfig,
+        estimate_stage: Stage,
+    ) -> anyhow::Result<Self> {
         Ok(Self {
             estimator: Some(estimator),
             workspace: Some(Workspace::new(workspace).map_err(|e| anyhow::anyhow!("estimator: {e}"))?),

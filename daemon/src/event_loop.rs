@@ -73,8 +73,12 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
     }
     // After the engines: their worker threads were started unpinned (they pin themselves).
     if let Some(&cpu) = config.estimator.pin_cpus.first() {
-        fusepose_estimator::cpu_pin::pin_current_thread(cpu)
-            .map_err(|e| anyhow::anyhow!("estimator.pin_cpus = {:?}: cannot pin the loop thread to CPU {cpu}: {e}", config.estimator.pin_cpus))?;
+        fusepose_estimator::cpu_pin::pin_current_thread(cpu).map_err(|e| {
+            anyhow::anyhow!(
+                "estimator.pin_cpus = {:?}: cannot pin the loop thread to CPU {cpu}: {e}",
+                config.estimator.pin_cpus
+            )
+        })?;
     }
     let mut hlog = if config.stats.hlog_path.as_os_str().is_empty() {
         None
@@ -91,7 +95,8 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
         .map_err(|e| anyhow::anyhow!("cannot create the WaitSet: {e:?}"))?;
     let mut frame_guards = Vec::with_capacity(ports.len());
     for p in &ports {
-        frame_guards.push(waitset.attach_notification(&p.frame_listener).map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?);
+        frame_guards
+            .push(waitset.attach_notification(&p.frame_listener).map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?);
     }
     let tick = waitset
         .attach_interval(Duration::from_millis(config.ipc.tick_ms))

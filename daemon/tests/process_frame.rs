@@ -6,7 +6,7 @@ use std::f64::consts::FRAC_PI_2;
 use std::time::Duration;
 
 use fusepose_client::{
-    Consumer, FrameLayout, InvalidReason, Ipc, IpcOptions, LabelFormat, LabelsMut, DepthMut, PlaneRef, PoseStatus,
+    Consumer, DepthMut, FrameLayout, InvalidReason, Ipc, IpcOptions, LabelFormat, LabelsMut, PlaneRef, PoseStatus,
     Producer, Stage,
 };
 use fusepose_daemon::camera::{CameraPorts, CameraState};

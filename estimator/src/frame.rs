@@ -330,7 +330,15 @@ mod tests {
     fn bad_focal_lengths_are_refused() {
         let p = planes();
         // 1e-300 and 0.5 are positive and finite but absurd (points at infinity).
-        for (fx, fy) in [(0.0, 500.0), (500.0, -1.0), (f64::NAN, 500.0), (500.0, f64::INFINITY), (1e-300, 500.0), (500.0, 0.5), (2e6, 500.0)] {
+        for (fx, fy) in [
+            (0.0, 500.0),
+            (500.0, -1.0),
+            (f64::NAN, 500.0),
+            (500.0, f64::INFINITY),
+            (1e-300, 500.0),
+            (500.0, 0.5),
+            (2e6, 500.0),
+        ] {
             let mut f = frame(&p);
             f.intrinsics.fx = fx;
             f.intrinsics.fy = fy;
@@ -360,10 +368,7 @@ mod tests {
     fn plane_size_mismatches_name_the_plane() {
         let mut p = planes();
         p.color.pop();
-        assert_eq!(
-            frame(&p).validate(),
-            Err(FrameError::PlaneSize { plane: "color", got: 143, expected: 144 })
-        );
+        assert_eq!(frame(&p).validate(), Err(FrameError::PlaneSize { plane: "color", got: 143, expected: 144 }));
         let mut p = planes();
         p.depth.push(0);
         assert_eq!(frame(&p).validate(), Err(FrameError::PlaneSize { plane: "depth", got: 49, expected: 48 }));

@@ -86,7 +86,13 @@ impl InstanceFinder {
     /// Labels `labels` (`width * height` values, row-major) and returns the
     /// kept components, largest first. A plane shorter than `width * height`
     /// is read as background beyond its end (callers validate sizes first).
-    pub fn find(&mut self, labels: &LabelPlane<'_>, width: usize, height: usize, limits: InstanceLimits) -> &[Component] {
+    pub fn find(
+        &mut self,
+        labels: &LabelPlane<'_>,
+        width: usize,
+        height: usize,
+        limits: InstanceLimits,
+    ) -> &[Component] {
         let n = width * height;
         self.width = width;
         self.height = height;
@@ -212,12 +218,7 @@ impl InstanceFinder {
             }
         }
         let clamp = |x: usize| x.min(u16::MAX as usize) as u16;
-        Component {
-            class_id,
-            component_id: id,
-            pixels,
-            bbox: [clamp(u_min), clamp(v_min), clamp(u_max), clamp(v_max)],
-        }
+        Component { class_id, component_id: id, pixels, bbox: [clamp(u_min), clamp(v_min), clamp(u_max), clamp(v_max)] }
     }
 
     /// Keeps `c` if it is among the `max_instances` largest so far.

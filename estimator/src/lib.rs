@@ -13,16 +13,16 @@ pub mod cpu_pin;
 pub mod frame;
 pub mod icp;
 pub mod instances;
-pub mod parts;
 pub mod net;
+pub mod parts;
 pub mod poses;
 pub mod sampling;
 pub mod seg;
 pub mod tracking;
 pub mod workspace;
 
-pub use icp::{IcpConfig, IcpEstimator};
 pub use frame::{ColorFormat, DepthCensus, DepthPlane, FrameError, FrameView, LabelPlane};
+pub use icp::{IcpConfig, IcpEstimator};
 pub use poses::{ObjectPose, PoseSet};
 pub use workspace::{Instance, PrepareStats, Workspace, WorkspaceConfig, WorkspaceConfigError};
 

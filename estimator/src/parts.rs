@@ -159,8 +159,8 @@ impl PartJoiner {
 mod tests {
     use super::*;
     use crate::frame::{ColorFormat, DepthPlane, LabelPlane};
-    use fusepose_scene::Intrinsics;
     use crate::instances::InstanceLimits;
+    use fusepose_scene::Intrinsics;
 
     const W: usize = 64;
     const H: usize = 32;

@@ -30,11 +30,7 @@ pub struct TrackingConfig {
 
 impl Default for TrackingConfig {
     fn default() -> Self {
-        Self {
-            max_fit_m: 0.008,
-            full_estimate_every: 5,
-            refine_iterations: 2,
-        }
+        Self { max_fit_m: 0.008, full_estimate_every: 5, refine_iterations: 2 }
     }
 }
 
@@ -75,11 +71,7 @@ pub struct TrackOutcome {
 
 impl Tracks {
     pub fn new(config: TrackingConfig, num_classes: usize) -> Self {
-        Self {
-            config,
-            tracks: vec![None; num_classes],
-            frame: 0,
-        }
+        Self { config, tracks: vec![None; num_classes], frame: 0 }
     }
 
     pub fn config(&self) -> &TrackingConfig {
@@ -100,36 +92,22 @@ impl Tracks {
     /// The prior for class `class_id` (1-based) this frame, if it may be tracked:
     /// seen in the previous frame with a good fit, and no full estimate due.
     pub fn prior(&self, class_id: u16) -> Option<Prior> {
-        let t = self
-            .tracks
-            .get((class_id as usize).checked_sub(1)?)?
-            .as_ref()?;
+        let t = self.tracks.get((class_id as usize).checked_sub(1)?)?.as_ref()?;
         let fresh = t.frame + 1 == self.frame;
         (fresh && t.since_full + 1 < self.config.full_estimate_every).then_some(t.prior)
     }
 
     /// Records class `class_id`'s final pose of this frame.
     pub fn update(&mut self, class_id: u16, pose: Prior, outcome: TrackOutcome) {
-        let Some(slot) = (class_id as usize)
-            .checked_sub(1)
-            .and_then(|i| self.tracks.get_mut(i))
-        else {
+        let Some(slot) = (class_id as usize).checked_sub(1).and_then(|i| self.tracks.get_mut(i)) else {
             return;
         };
         if !(outcome.fit_m <= self.config.max_fit_m) {
             *slot = None;
             return;
         }
-        let since_full = if outcome.tracked {
-            slot.map_or(0, |t| t.since_full) + 1
-        } else {
-            0
-        };
-        *slot = Some(Track {
-            prior: pose,
-            since_full,
-            frame: self.frame,
-        });
+        let since_full = if outcome.tracked { slot.map_or(0, |t| t.since_full) + 1 } else { 0 };
+        *slot = Some(Track { prior: pose, since_full, frame: self.frame });
     }
 
     /// Forgets every track (e.g. after a camera jump).
@@ -145,22 +123,14 @@ pub struct FitCheck {
 
 impl FitCheck {
     pub fn new(objects: &ObjectSet) -> Self {
-        let clouds = (1..=objects.len() as u16)
-            .map(|c| objects.by_class(c).and_then(ModelCloud::new))
-            .collect();
+        let clouds = (1..=objects.len() as u16).map(|c| objects.by_class(c).and_then(ModelCloud::new)).collect();
         Self { clouds }
     }
 
     /// Median distance of `points` (camera frame, metres; rows of x, y, z) to
     /// the model of class index `k` (0-based) posed at (`rotation`, `translation`),
     /// metres; NaN without a model or points. Uses at most 64 points (evenly spaced).
-    pub fn fit_m(
-        &self,
-        k: usize,
-        points: ArrayView2<f32>,
-        rotation: &Matrix3<f32>,
-        translation: &Vector3<f32>,
-    ) -> f64 {
+    pub fn fit_m(&self, k: usize, points: ArrayView2<f32>, rotation: &Matrix3<f32>, translation: &Vector3<f32>) -> f64 {
         const MAX_CHECKED: usize = 64;
         let Some(Some(cloud)) = self.clouds.get(k) else {
             return f64::NAN;
@@ -190,63 +160,28 @@ mod tests {
     use super::*;
 
     fn prior(x: f32) -> Prior {
-        Prior {
-            rotation: Matrix3::identity(),
-            translation: Vector3::new(x, 0.0, 0.5),
-            confidence: 0.9,
-        }
+        Prior { rotation: Matrix3::identity(), translation: Vector3::new(x, 0.0, 0.5), confidence: 0.9 }
     }
 
-    const GOOD: TrackOutcome = TrackOutcome {
-        tracked: false,
-        fit_m: 0.002,
-    };
+    const GOOD: TrackOutcome = TrackOutcome { tracked: false, fit_m: 0.002 };
 
     #[test]
     fn tracks_only_fresh_good_fits_and_forces_periodic_full_estimates() {
-        let config = TrackingConfig {
-            full_estimate_every: 3,
-            ..TrackingConfig::default()
-        };
+        let config = TrackingConfig { full_estimate_every: 3, ..TrackingConfig::default() };
         let mut t = Tracks::new(config, 2);
         t.begin_frame();
         assert_eq!(t.prior(1), None, "nothing seen yet");
         t.update(1, prior(0.1), GOOD);
-        t.update(
-            2,
-            prior(0.2),
-            TrackOutcome {
-                tracked: false,
-                fit_m: 0.05,
-            },
-        );
+        t.update(2, prior(0.2), TrackOutcome { tracked: false, fit_m: 0.05 });
         t.begin_frame();
         assert_eq!(t.prior(1), Some(prior(0.1)));
         assert_eq!(t.prior(2), None, "bad fit is not tracked");
-        t.update(
-            1,
-            prior(0.11),
-            TrackOutcome {
-                tracked: true,
-                fit_m: 0.003,
-            },
-        );
+        t.update(1, prior(0.11), TrackOutcome { tracked: true, fit_m: 0.003 });
         t.begin_frame();
         assert_eq!(t.prior(1), Some(prior(0.11)));
-        t.update(
-            1,
-            prior(0.12),
-            TrackOutcome {
-                tracked: true,
-                fit_m: 0.003,
-            },
-        );
+        t.update(1, prior(0.12), TrackOutcome { tracked: true, fit_m: 0.003 });
         t.begin_frame();
-        assert_eq!(
-            t.prior(1),
-            None,
-            "two tracked frames in a row: a full estimate is due (every 3)"
-        );
+        assert_eq!(t.prior(1), None, "two tracked frames in a row: a full estimate is due (every 3)");
         t.update(1, prior(0.13), GOOD);
         t.begin_frame();
         assert!(t.prior(1).is_some());
@@ -263,29 +198,13 @@ mod tests {
         let check = FitCheck::new(&objects);
         let model = objects.by_class(1).unwrap();
         let t = Vector3::new(0.0f32, 0.0, 0.6);
-        let pts: Vec<f32> = model
-            .samples
-            .iter()
-            .step_by(7)
-            .flat_map(|p| [p.x as f32, p.y as f32, p.z as f32 + 0.6])
-            .collect();
+        let pts: Vec<f32> =
+            model.samples.iter().step_by(7).flat_map(|p| [p.x as f32, p.y as f32, p.z as f32 + 0.6]).collect();
         let pts = ndarray::Array2::from_shape_vec((pts.len() / 3, 3), pts).unwrap();
         let good = check.fit_m(0, pts.view(), &Matrix3::identity(), &t);
-        let bad = check.fit_m(
-            0,
-            pts.view(),
-            &Matrix3::identity(),
-            &(t + Vector3::new(0.04, 0.04, 0.04)),
-        );
+        let bad = check.fit_m(0, pts.view(), &Matrix3::identity(), &(t + Vector3::new(0.04, 0.04, 0.04)));
         assert!(good < 0.002, "{good}");
-        assert!(
-            bad > TrackingConfig::default().max_fit_m,
-            "a pose 7 cm off is not kept: {bad}"
-        );
-        assert!(
-            check
-                .fit_m(99, pts.view(), &Matrix3::identity(), &t)
-                .is_nan()
-        );
+        assert!(bad > TrackingConfig::default().max_fit_m, "a pose 7 cm off is not kept: {bad}");
+        assert!(check.fit_m(99, pts.view(), &Matrix3::identity(), &t).is_nan());
     }
 }

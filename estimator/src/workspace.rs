@@ -451,6 +451,9 @@ mod tests {
         assert_eq!(bad(WorkspaceConfig { max_instances: 0, ..base }), Some(WorkspaceConfigError::MaxInstances(0)));
         assert_eq!(bad(WorkspaceConfig { num_points: 0, ..base }), Some(WorkspaceConfigError::NumPoints(0)));
         assert_eq!(bad(WorkspaceConfig { crop_size: 0, ..base }), Some(WorkspaceConfigError::CropSize(0)));
-        assert!(matches!(bad(WorkspaceConfig { crop_margin: f32::NAN, ..base }), Some(WorkspaceConfigError::CropMargin(_))));
+        assert!(matches!(
+            bad(WorkspaceConfig { crop_margin: f32::NAN, ..base }),
+            Some(WorkspaceConfigError::CropMargin(_))
+        ));
     }
 }

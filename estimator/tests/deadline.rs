@@ -7,54 +7,31 @@
 use std::time::{Duration, Instant};
 
 use fusepose_estimator::net::{NetEstimator, NetOptions};
-use fusepose_estimator::{
-    ColorFormat, DepthPlane, Estimator, FrameView, LabelPlane, PoseSet, Workspace,
-};
+use fusepose_estimator::{ColorFormat, DepthPlane, Estimator, FrameView, LabelPlane, PoseSet, Workspace};
 use fusepose_scene::Intrinsics;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
 
 #[test]
 fn refiner_iterations_and_points_follow_the_deadline() {
-    let weights =
-        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+    let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
     if !weights.exists() {
         eprintln!("SKIPPED: {} is missing", weights.display());
         return;
     }
     let set = fusepose_scene::builtin::builtin_objects();
-    let options = NetOptions {
-        refine_iterations: Some(2),
-        threads: 1,
-        ..NetOptions::default()
-    };
+    let options = NetOptions { refine_iterations: Some(2), threads: 1, ..NetOptions::default() };
     let mut net = NetEstimator::load(&weights, &set, options).unwrap();
     let k = Intrinsics::YCB_VIDEO;
-    let cfg = SamplerConfig {
-        min_objects: 3,
-        max_objects: 3,
-        ..SamplerConfig::default()
-    };
+    let cfg = SamplerConfig { min_objects: 3, max_objects: 3, ..SamplerConfig::default() };
     let scene = sample_scene(&set, &cfg, 11).unwrap();
     let mut target = RenderTarget::for_intrinsics(&k);
-    render_view_labelled(
-        &scene,
-        &set,
-        0,
-        &k,
-        &NoiseConfig::default(),
-        LabelKind::Class,
-        &mut target,
-    )
-    .unwrap();
+    render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Class, &mut target).unwrap();
     let frame = FrameView {
         intrinsics: k,
         color_format: ColorFormat::Rgb8,
         color: target.rgb(),
-        depth: DepthPlane::U16 {
-            data: target.depth_u16(),
-            scale: 1e-4,
-        },
+        depth: DepthPlane::U16 { data: target.depth_u16(), scale: 1e-4 },
         labels: Some(LabelPlane::U16(target.labels())),
     };
     let mut ws = Workspace::new(net.workspace_config(8)).unwrap();
@@ -65,29 +42,17 @@ fn refiner_iterations_and_points_follow_the_deadline() {
 
     // No deadline: the full refiner for every object (this also teaches the costs).
     net.estimate(&frame, &mut ws, &mut out).unwrap();
-    assert!(
-        out.as_slice().iter().all(|p| p.iterations == 2),
-        "{:?}",
-        out.as_slice()
-    );
+    assert!(out.as_slice().iter().all(|p| p.iterations == 2), "{:?}", out.as_slice());
     assert!(!net.degraded());
 
     // A deadline already (almost) over: no refiner, a quarter of the points, flagged.
     net.set_deadline(Some(Instant::now() + Duration::from_micros(10)));
     net.estimate(&frame, &mut ws, &mut out).unwrap();
     assert_eq!(out.len(), found, "every object still gets a pose");
-    assert!(
-        out.as_slice().iter().all(|p| p.iterations == 0),
-        "{:?}",
-        out.as_slice()
-    );
+    assert!(out.as_slice().iter().all(|p| p.iterations == 0), "{:?}", out.as_slice());
     assert!(net.degraded());
     assert_eq!(net.last_plan().points, full_points.div_ceil(4));
-    assert!(
-        out.as_slice()
-            .iter()
-            .all(|p| p.translation.iter().all(|v| v.is_finite()) && p.translation.z > 0.0)
-    );
+    assert!(out.as_slice().iter().all(|p| p.translation.iter().all(|v| v.is_finite()) && p.translation.z > 0.0));
 
     // Plenty of time: full again.
     net.set_deadline(Some(Instant::now() + Duration::from_secs(10)));
@@ -96,8 +61,5 @@ fn refiner_iterations_and_points_follow_the_deadline() {
     assert!(!net.degraded());
     assert_eq!(net.last_plan().points, full_points);
     let c = net.counters();
-    assert_eq!(
-        (c.objects, c.degraded_frames, c.reduced_point_objects),
-        (3 * found as u64, 1, found as u64)
-    );
+    assert_eq!((c.objects, c.degraded_frames, c.reduced_point_objects), (3 * found as u64, 1, found as u64));
 }

@@ -35,7 +35,14 @@ fn icp_recovers_poses_within_5mm_and_3deg() {
             let truth = if est.class_id == 1 { pl } else { ps };
             let dt = (est.translation - truth.translation.vector).norm();
             let dr = angle_deg(&est.rotation, &truth.rotation);
-            eprintln!("case {seed} class {}: {:.2} mm, {:.2}°, conf {:.2}, {} it", est.class_id, dt * 1e3, dr, est.confidence, est.iterations);
+            eprintln!(
+                "case {seed} class {}: {:.2} mm, {:.2}°, conf {:.2}, {} it",
+                est.class_id,
+                dt * 1e3,
+                dr,
+                est.confidence,
+                est.iterations
+            );
             assert!(dt < 0.005, "case {seed} class {}: translation error {:.1} mm", est.class_id, dt * 1e3);
             assert!(dr < 3.0, "case {seed} class {}: rotation error {:.1}°", est.class_id, dr);
             assert!(est.confidence > 0.5, "confidence {}", est.confidence);
@@ -71,7 +78,13 @@ fn wrong_object_gets_low_confidence() {
     let mut other = IcpEstimator::new(&object_set(std::slice::from_ref(&l)), IcpConfig::default()).unwrap();
     let a = own.fit(1, &pts).unwrap();
     let b = other.fit(1, &pts).unwrap();
-    eprintln!("own {:.3} (rmse {:.2} mm), other {:.3} (rmse {:.2} mm)", a.confidence, a.rmse * 1e3, b.confidence, b.rmse * 1e3);
+    eprintln!(
+        "own {:.3} (rmse {:.2} mm), other {:.3} (rmse {:.2} mm)",
+        a.confidence,
+        a.rmse * 1e3,
+        b.confidence,
+        b.rmse * 1e3
+    );
     assert!(a.confidence > b.confidence);
     assert!(a.rmse < 0.002);
 }
@@ -90,11 +103,11 @@ fn icp_success_rate_over_random_poses_with_depth_noise() {
     let mut elapsed = std::time::Duration::ZERO;
     for i in 0..trials {
         let axis = [rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)];
-        let truth = pose(axis, rng.random_range(0.0..180.0), [
-            rng.random_range(-0.05..0.05),
-            rng.random_range(-0.04..0.04),
-            rng.random_range(0.4..0.7),
-        ]);
+        let truth = pose(
+            axis,
+            rng.random_range(0.0..180.0),
+            [rng.random_range(-0.05..0.05), rng.random_range(-0.04..0.04), rng.random_range(0.4..0.7)],
+        );
         let (class, obj) = if i % 2 == 0 { (1, &l) } else { (2, &s) };
         let mut frame = render(&[(class, obj, truth)]);
         // ~0.5 mm uniform depth noise (in 0.1 mm units).
@@ -114,7 +127,10 @@ fn icp_success_rate_over_random_poses_with_depth_noise() {
             eprintln!("trial {i} class {class}: {:.1} mm, {:.1}°, conf {:.2}", dt * 1e3, dr, est.confidence);
         }
     }
-    eprintln!("success {ok}/{trials}, {:.1} ms per object (this build's opt level)", elapsed.as_secs_f64() * 1e3 / trials as f64);
+    eprintln!(
+        "success {ok}/{trials}, {:.1} ms per object (this build's opt level)",
+        elapsed.as_secs_f64() * 1e3 / trials as f64
+    );
     assert!(ok * 10 >= trials * 8, "only {ok}/{trials} within 5 mm / 3°");
 }
 

@@ -109,7 +109,13 @@ fn frame_planes(shift: usize) -> (Vec<u8>, Vec<u16>) {
         let (u, v) = (p % w, p / w);
         let near = (200 + shift..360 + shift).contains(&u) && (150..300).contains(&v);
         color[3 * p..3 * p + 3].copy_from_slice(&[(u / 3) as u8, (v / 2) as u8, if near { 220 } else { 40 }]);
-        depth[p] = if p % 53 == 0 { 0 } else if near { 6000 } else { 9000 + v as u16 * 4 };
+        depth[p] = if p % 53 == 0 {
+            0
+        } else if near {
+            6000
+        } else {
+            9000 + v as u16 * 4
+        };
     }
     (color, depth)
 }
@@ -142,7 +148,8 @@ fn segment_does_not_allocate_after_warm_up_and_feeds_the_workspace() {
     assert!(labels.iter().all(|&l| (l as usize) <= set.len()));
 
     // The label plane is what Workspace::prepare consumes.
-    let mut ws = Workspace::new(WorkspaceConfig { num_classes: set.len() as u16, ..WorkspaceConfig::default() }).unwrap();
+    let mut ws =
+        Workspace::new(WorkspaceConfig { num_classes: set.len() as u16, ..WorkspaceConfig::default() }).unwrap();
     let frame = FrameView { labels: Some(LabelPlane::U16(&labels)), ..view(&c0, &d0) };
     let count = ws.prepare(&frame, 1).unwrap();
     let distinct: std::collections::BTreeSet<u16> = labels.iter().copied().filter(|&l| l > 0).collect();
@@ -192,6 +199,13 @@ fn segment_time_per_frame() {
     let load = std::fs::read_to_string("/proc/loadavg").unwrap_or_default();
     println!(
         "segment 640x480: median {:.2} ms (p10 {:.2}, p90 {:.2}); network only: median {:.2} ms; {:.1} MMAC = {:.0} MFLOP; {} params; loadavg {}",
-        t[25], t[5], t[45], t_net[25], cfg.macs() as f64 / 1e6, 2.0 * cfg.macs() as f64 / 1e6, cfg.parameter_count(), load.trim()
+        t[25],
+        t[5],
+        t[45],
+        t_net[25],
+        cfg.macs() as f64 / 1e6,
+        2.0 * cfg.macs() as f64 / 1e6,
+        cfg.parameter_count(),
+        load.trim()
     );
 }

@@ -20,8 +20,7 @@ use fusepose_client::{FrameHeader, InvalidReason, PlaneRef, decode_frame};
 use fusepose_daemon::frame_view::to_frame_view;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
 use fusepose_estimator::{
-    ColorFormat, DepthPlane, Estimator, FrameError, FrameView, LabelPlane, PoseSet, Workspace,
-    WorkspaceConfig,
+    ColorFormat, DepthPlane, Estimator, FrameError, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig,
 };
 use fusepose_scene::{Intrinsics, Mesh, ObjectModel, ObjectSet, Symmetry};
 
@@ -104,27 +103,16 @@ pub fn parse_header(b: &[u8; HEADER_LEN]) -> FrameHeader {
         fy: f(u64s[3]),
         cx: f(u64s[4]),
         cy: f(u64s[5]),
-        color: PlaneRef {
-            offset: u64s[6],
-            len: u64s[7],
-        },
-        depth: PlaneRef {
-            offset: u64s[8],
-            len: u64s[9],
-        },
-        labels: PlaneRef {
-            offset: u64s[10],
-            len: u64s[11],
-        },
+        color: PlaneRef { offset: u64s[6], len: u64s[7] },
+        depth: PlaneRef { offset: u64s[8], len: u64s[9] },
+        labels: PlaneRef { offset: u64s[10], len: u64s[11] },
     }
 }
 
 // The field order and offsets parse_header assumes, checked against the real layout.
 const _: () = {
     use std::mem::offset_of;
-    assert!(
-        offset_of!(FrameHeader, depth_scale) == 20 && offset_of!(FrameHeader, color_format) == 24
-    );
+    assert!(offset_of!(FrameHeader, depth_scale) == 20 && offset_of!(FrameHeader, color_format) == 24);
     assert!(offset_of!(FrameHeader, _reserved) == 28 && offset_of!(FrameHeader, sequence) == 32);
     assert!(offset_of!(FrameHeader, fx) == 48 && offset_of!(FrameHeader, cy) == 72);
     assert!(offset_of!(FrameHeader, color) == 80 && offset_of!(FrameHeader, labels) == 112);
@@ -143,14 +131,7 @@ pub fn header_bytes(h: &FrameHeader) -> [u8; HEADER_LEN] {
     out.extend_from_slice(&h.depth_scale.to_le_bytes());
     out.extend_from_slice(&[h.color_format, h.depth_format, h.has_labels, h.label_format]);
     out.extend_from_slice(&h._reserved.to_le_bytes());
-    for v in [
-        h.sequence,
-        h.capture_time_ns,
-        h.fx.to_bits(),
-        h.fy.to_bits(),
-        h.cx.to_bits(),
-        h.cy.to_bits(),
-    ] {
+    for v in [h.sequence, h.capture_time_ns, h.fx.to_bits(), h.fy.to_bits(), h.cx.to_bits(), h.cy.to_bits()] {
         out.extend_from_slice(&v.to_le_bytes());
     }
     for p in [h.color, h.depth, h.labels] {
@@ -218,10 +199,7 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
     assert_eq!(result, again, "prepare is not deterministic");
     assert_eq!(first, ws.instances, "prepare is not deterministic");
     assert!(
-        first_points
-            .iter()
-            .zip(ws.points.iter())
-            .all(|(a, b)| a.to_bits() == b.to_bits()),
+        first_points.iter().zip(ws.points.iter()).all(|(a, b)| a.to_bits() == b.to_bits()),
         "prepare is not deterministic"
     );
     match (content, result) {
@@ -240,60 +218,29 @@ fn check_workspace(ws: &Workspace, view: &FrameView<'_>, result: &Result<usize, 
     }
     assert!(ws.instances.len() <= c.max_instances);
     for (i, inst) in ws.instances.iter().enumerate() {
-        assert!(
-            inst.class_id >= 1 && inst.class_id <= c.num_classes,
-            "{inst:?}"
-        );
+        assert!(inst.class_id >= 1 && inst.class_id <= c.num_classes, "{inst:?}");
         assert!(inst.pixels as usize >= c.min_pixels, "{inst:?}");
-        assert!(
-            inst.valid_depth_pixels as usize >= c.min_valid_depth,
-            "{inst:?}"
-        );
+        assert!(inst.valid_depth_pixels as usize >= c.min_valid_depth, "{inst:?}");
         assert!(inst.valid_depth_pixels <= inst.pixels, "{inst:?}");
         let [u0, v0, u1, v1] = inst.bbox.map(|x| x as usize);
-        assert!(
-            u0 <= u1 && u1 < w && v0 <= v1 && v1 < h,
-            "bbox outside the image: {inst:?}"
-        );
+        assert!(u0 <= u1 && u1 < w && v0 <= v1 && v1 < h, "bbox outside the image: {inst:?}");
         let [cu, cv, side] = inst.crop_window.map(|x| x as usize);
-        assert!(
-            side >= 1 && cu + side <= w && cv + side <= h,
-            "crop window outside the image: {inst:?}"
-        );
+        assert!(side >= 1 && cu + side <= w && cv + side <= h, "crop window outside the image: {inst:?}");
         if i > 0 {
-            assert!(
-                ws.instances[i - 1].pixels >= inst.pixels,
-                "instances not largest first"
-            );
+            assert!(ws.instances[i - 1].pixels >= inst.pixels, "instances not largest first");
         }
         for j in 0..c.num_points {
-            assert!(
-                (ws.choose[[i, j]] as usize) < c.crop_size * c.crop_size,
-                "choose out of the crop"
-            );
+            assert!((ws.choose[[i, j]] as usize) < c.crop_size * c.crop_size, "choose out of the crop");
             // Every sampled point has the valid depth it was sampled for.
             let z = ws.points[[i, j, 2]];
-            assert!(
-                z.is_finite() && z > 0.0,
-                "point {j} of instance {i} has depth {z}"
-            );
+            assert!(z.is_finite() && z > 0.0, "point {j} of instance {i} has depth {z}");
         }
     }
     // Rows past the instances are zero.
     let k = ws.instances.len();
-    assert!(
-        ws.points
-            .iter()
-            .skip(k * c.num_points * 3)
-            .all(|&x| x == 0.0)
-    );
+    assert!(ws.points.iter().skip(k * c.num_points * 3).all(|&x| x == 0.0));
     assert!(ws.choose.iter().skip(k * c.num_points).all(|&x| x == 0));
-    assert!(
-        ws.crops
-            .iter()
-            .skip(k * 3 * c.crop_size * c.crop_size)
-            .all(|&x| x == 0.0)
-    );
+    assert!(ws.crops.iter().skip(k * 3 * c.crop_size * c.crop_size).all(|&x| x == 0.0));
 }
 
 fn bytemuck_u8(words: &mut [u64]) -> &mut [u8] {
@@ -358,11 +305,7 @@ pub fn seed_frame_with(f: SeedFormat, depth_of: impl Fn(usize, f32) -> f32) -> V
             let c = color.offset as usize + p * 3;
             payload[c..c + 3].copy_from_slice(&[(u * 20) as u8, (v * 20) as u8, 99]);
             let hole = class_at(u, v) == 2 && u == w - 1;
-            let metres = if hole {
-                0.0
-            } else {
-                0.9 + 0.01 * (u + v) as f32
-            };
+            let metres = if hole { 0.0 } else { 0.9 + 0.01 * (u + v) as f32 };
             let metres = depth_of(p, metres);
             if f.depth_f32 {
                 let d = depth.offset as usize + p * 4;
@@ -468,17 +411,12 @@ pub fn model_load(data: &[u8]) -> ModelOutcome {
         assert_eq!(t.len(), shape.iter().product::<usize>(), "{name}");
     }
     let objects = fuzz_objects(MODEL_CLASSES);
-    let options = NetOptions {
-        refine_iterations: None,
-        threads: 1,
-        ..NetOptions::default()
-    };
+    let options = NetOptions { refine_iterations: None, threads: 1, ..NetOptions::default() };
     let mut net = match NetEstimator::from_file(file, &objects, options) {
         Ok(n) => n,
         Err(e) => return ModelOutcome::Refused(e),
     };
-    let mut ws = Workspace::new(net.workspace_config(1))
-        .expect("a loaded net gives a valid workspace config");
+    let mut ws = Workspace::new(net.workspace_config(1)).expect("a loaded net gives a valid workspace config");
     // 16x16 with an 8x8 object: above the default min_pixels (50) and min_valid_depth.
     let (w, h) = (16usize, 16usize);
     let color = vec![128u8; w * h * 3];
@@ -490,20 +428,10 @@ pub fn model_load(data: &[u8]) -> ModelOutcome {
         }
     }
     let frame = FrameView {
-        intrinsics: Intrinsics {
-            fx: 20.0,
-            fy: 20.0,
-            cx: 8.0,
-            cy: 8.0,
-            width: w as u32,
-            height: h as u32,
-        },
+        intrinsics: Intrinsics { fx: 20.0, fy: 20.0, cx: 8.0, cy: 8.0, width: w as u32, height: h as u32 },
         color_format: ColorFormat::Rgb8,
         color: &color,
-        depth: DepthPlane::U16 {
-            data: &depth,
-            scale: 0.001,
-        },
+        depth: DepthPlane::U16 { data: &depth, scale: 0.001 },
         labels: Some(LabelPlane::U8(&labels)),
     };
     let n = ws.prepare(&frame, 1).expect("the harness frame is valid");
@@ -516,18 +444,8 @@ pub fn model_load(data: &[u8]) -> ModelOutcome {
     let poses = out.len();
     // An absurd focal length (points at infinity) is refused by validation
     // since the fx range check; the smallest accepted one must still estimate.
-    let absurd = FrameView {
-        intrinsics: Intrinsics {
-            fx: 1e-300,
-            fy: 1e-300,
-            ..frame.intrinsics
-        },
-        ..frame
-    };
-    assert!(matches!(
-        ws.prepare(&absurd, 1),
-        Err(FrameError::BadFocalLength { .. })
-    ));
+    let absurd = FrameView { intrinsics: Intrinsics { fx: 1e-300, fy: 1e-300, ..frame.intrinsics }, ..frame };
+    assert!(matches!(ws.prepare(&absurd, 1), Err(FrameError::BadFocalLength { .. })));
     let extreme = FrameView {
         intrinsics: Intrinsics {
             fx: *fusepose_estimator::frame::FOCAL_RANGE_PX.start(),
@@ -618,10 +536,7 @@ fn json_string(s: &str) -> String {
 
 /// A safetensors file (no mode byte) with the given metadata and tensors
 /// `(name, shape, values)`, written by hand to the format's specification.
-pub fn safetensors_bytes(
-    metadata: &[(&str, &str)],
-    tensors: &[(String, Vec<usize>, Vec<f32>)],
-) -> Vec<u8> {
+pub fn safetensors_bytes(metadata: &[(&str, &str)], tensors: &[(String, Vec<usize>, Vec<f32>)]) -> Vec<u8> {
     let (header, data) = safetensors_parts(metadata, tensors);
     let mut out = (header.len() as u64).to_le_bytes().to_vec();
     out.extend_from_slice(header.as_bytes());
@@ -630,15 +545,9 @@ pub fn safetensors_bytes(
 }
 
 /// Header JSON (space-padded to a multiple of 8 bytes) and data of a safetensors file.
-pub fn safetensors_parts(
-    metadata: &[(&str, &str)],
-    tensors: &[(String, Vec<usize>, Vec<f32>)],
-) -> (String, Vec<u8>) {
+pub fn safetensors_parts(metadata: &[(&str, &str)], tensors: &[(String, Vec<usize>, Vec<f32>)]) -> (String, Vec<u8>) {
     let mut fields = Vec::new();
-    let meta: Vec<String> = metadata
-        .iter()
-        .map(|(k, v)| format!("{}:{}", json_string(k), json_string(v)))
-        .collect();
+    let meta: Vec<String> = metadata.iter().map(|(k, v)| format!("{}:{}", json_string(k), json_string(v))).collect();
     fields.push(format!("\"__metadata__\":{{{}}}", meta.join(",")));
     let mut data = Vec::new();
     let mut sorted: Vec<&(String, Vec<usize>, Vec<f32>)> = tensors.iter().collect();
@@ -665,18 +574,14 @@ pub fn safetensors_parts(
 }
 
 /// Every tensor of a config with small deterministic values.
-pub fn seed_tensors(
-    config: &fusepose_estimator::net::NetConfig,
-) -> Vec<(String, Vec<usize>, Vec<f32>)> {
+pub fn seed_tensors(config: &fusepose_estimator::net::NetConfig) -> Vec<(String, Vec<usize>, Vec<f32>)> {
     config
         .tensor_shapes()
         .into_iter()
         .enumerate()
         .map(|(t, (name, shape))| {
             let n: usize = shape.iter().product();
-            let values = (0..n)
-                .map(|i| (((i * 7 + t * 13) % 17) as f32 - 8.0) * 0.05)
-                .collect();
+            let values = (0..n).map(|i| (((i * 7 + t * 13) % 17) as f32 - 8.0) * 0.05).collect();
             (name, shape, values)
         })
         .collect()
@@ -717,12 +622,7 @@ pub fn seed_model(
 /// number after `_n` is the instance count), `refused_*` decodes but
 /// `prepare` refuses it, `reject_*` the decoder refuses.
 pub fn frame_seeds() -> Vec<(&'static str, Vec<u8>)> {
-    let fmt = |width, height, depth_f32, labels| SeedFormat {
-        width,
-        height,
-        depth_f32,
-        labels,
-    };
+    let fmt = |width, height, depth_f32, labels| SeedFormat { width, height, depth_f32, labels };
     let base = seed_frame(fmt(8, 6, false, Some(false)));
     let nan = f64::NAN;
     let edit = |f: &dyn Fn(&mut FrameHeader)| with_header(&base, f);
@@ -740,55 +640,31 @@ pub fn frame_seeds() -> Vec<(&'static str, Vec<u8>)> {
     let truncated = base[..base.len() - 1].to_vec();
     vec![
         ("valid_n3_u16depth_u8labels", base.clone()),
-        (
-            "valid_n3_f32depth_u16labels_odd",
-            seed_frame(fmt(7, 5, true, Some(true))),
-        ),
+        ("valid_n3_f32depth_u16labels_odd", seed_frame(fmt(7, 5, true, Some(true)))),
         ("refused_unknown_class", unknown),
         ("valid_n0_1x1", seed_frame(fmt(1, 1, false, Some(false)))),
         ("reject_tiny_fx", edit(&|h| (h.fx, h.cx) = (1e-300, -4.0))),
         ("valid_n3_smallest_fx", edit(&|h| (h.fx, h.fy) = (1.0, 1.0))),
-        (
-            "valid_n1_wide_512x2",
-            seed_frame(fmt(512, 2, false, Some(true))),
-        ),
+        ("valid_n1_wide_512x2", seed_frame(fmt(512, 2, false, Some(true)))),
         ("refused_no_labels", seed_frame(fmt(8, 6, false, None))),
         ("reject_bad_magic", edit(&|h| h.magic = 0)),
         ("reject_version", edit(&|h| h.format_version = 99)),
         ("reject_wrong_camera", edit(&|h| h.camera_id ^= 1)),
         ("reject_bad_size", edit(&|h| h.width = 0)),
-        (
-            "reject_too_large",
-            edit(&|h| (h.width, h.height) = (4097, 1)),
-        ),
+        ("reject_too_large", edit(&|h| (h.width, h.height) = (4097, 1))),
         ("reject_unknown_format", edit(&|h| h.depth_format = 3)),
         ("reject_label_flag", edit(&|h| h.has_labels = 2)),
         ("reject_bad_intrinsics", edit(&|h| h.fx = nan)),
         ("reject_principal_point", edit(&|h| h.cy = 1e9)),
-        (
-            "reject_depth_scale",
-            edit(&|h| h.depth_scale = f32::INFINITY),
-        ),
-        (
-            "reject_plane_out_of_bounds",
-            edit(&|h| h.labels.offset = u64::MAX - 3),
-        ),
+        ("reject_depth_scale", edit(&|h| h.depth_scale = f32::INFINITY)),
+        ("reject_plane_out_of_bounds", edit(&|h| h.labels.offset = u64::MAX - 3)),
         ("reject_plane_length", edit(&|h| h.color.len -= 3)),
         ("reject_plane_misaligned", edit(&|h| h.depth.offset += 1)),
-        (
-            "reject_plane_overlap",
-            edit(&|h| h.labels.offset = h.depth.offset),
-        ),
+        ("reject_plane_overlap", edit(&|h| h.labels.offset = h.depth.offset)),
         ("reject_truncated", truncated),
         ("reject_labels_missing", edit(&|h| h.labels.len = 0)),
-        (
-            "refused_all_zero_depth",
-            seed_frame_with(fmt(8, 6, false, Some(false)), |_, _| 0.0),
-        ),
-        (
-            "refused_all_nan_depth",
-            seed_frame_with(fmt(8, 6, true, Some(false)), |_, _| f32::NAN),
-        ),
+        ("refused_all_zero_depth", seed_frame_with(fmt(8, 6, false, Some(false)), |_, _| 0.0)),
+        ("refused_all_nan_depth", seed_frame_with(fmt(8, 6, true, Some(false)), |_, _| f32::NAN)),
     ]
 }
 
@@ -807,77 +683,36 @@ pub fn model_seeds() -> Vec<(&'static str, Vec<u8>)> {
             r
         }),
         ("bad_empty", vec![0]),
-        (
-            "bad_wrong_shape",
-            seed_model(1, |_, _, t| t[0].1 = vec![t[0].2.len(), 1, 1, 1]),
-        ),
+        ("bad_wrong_shape", seed_model(1, |_, _, t| t[0].1 = vec![t[0].2.len(), 1, 1, 1])),
         (
             "bad_missing_tensor",
             seed_model(1, |_, _, t| {
                 t.pop();
             }),
         ),
-        (
-            "bad_config_json",
-            seed_model(1, |c, _, _| *c = c.replace("\"emb\":1", "\"emb\":\"x\"")),
-        ),
-        (
-            "bad_zero_width",
-            seed_model(1, |c, _, _| *c = c.replace("\"emb\":1", "\"emb\":0")),
-        ),
-        (
-            "bad_crop_not_div4",
-            seed_model(1, |c, _, _| {
-                *c = c.replace("\"crop_size\":4", "\"crop_size\":6")
-            }),
-        ),
-        (
-            "bad_object_count",
-            seed_model(1, |_, o, _| {
-                *o = o[..o.find("},{").unwrap() + 1].to_string() + "]"
-            }),
-        ),
-        (
-            "bad_object_name",
-            seed_model(1, |_, o, _| *o = o.replace("fuzz_1", "fuzz_9")),
-        ),
+        ("bad_config_json", seed_model(1, |c, _, _| *c = c.replace("\"emb\":1", "\"emb\":\"x\""))),
+        ("bad_zero_width", seed_model(1, |c, _, _| *c = c.replace("\"emb\":1", "\"emb\":0"))),
+        ("bad_crop_not_div4", seed_model(1, |c, _, _| *c = c.replace("\"crop_size\":4", "\"crop_size\":6"))),
+        ("bad_object_count", seed_model(1, |_, o, _| *o = o[..o.find("},{").unwrap() + 1].to_string() + "]")),
+        ("bad_object_name", seed_model(1, |_, o, _| *o = o.replace("fuzz_1", "fuzz_9"))),
         (
             "bad_huge_points",
-            seed_model(1, |c, _, _| {
-                *c = c.replace("\"num_points\":4", "\"num_points\":1000000000000000")
-            }),
+            seed_model(1, |c, _, _| *c = c.replace("\"num_points\":4", "\"num_points\":1000000000000000")),
         ),
-        (
-            "bad_huge_crop",
-            seed_model(1, |c, _, _| {
-                *c = c.replace("\"crop_size\":4", "\"crop_size\":4000000000000")
-            }),
-        ),
+        ("bad_huge_crop", seed_model(1, |c, _, _| *c = c.replace("\"crop_size\":4", "\"crop_size\":4000000000000"))),
         (
             "valid_nan_weights",
-            seed_model(1, |_, _, t| {
-                t.iter_mut()
-                    .for_each(|x| x.2.iter_mut().for_each(|v| *v = f32::NAN))
-            }),
+            seed_model(1, |_, _, t| t.iter_mut().for_each(|x| x.2.iter_mut().for_each(|v| *v = f32::NAN))),
         ),
         (
             "bad_huge_refine_iters",
-            seed_model(1, |c, _, _| {
-                *c = c.replace("\"refine_iters\":1", "\"refine_iters\":100000000000")
-            }),
+            seed_model(1, |c, _, _| *c = c.replace("\"refine_iters\":1", "\"refine_iters\":100000000000")),
         ),
         (
             "bad_huge_width",
-            seed_model(1, |c, _, _| {
-                *c = c.replace("\"geo\":[1,1]", "\"geo\":[18446744073709551615,1]")
-            }),
+            seed_model(1, |c, _, _| *c = c.replace("\"geo\":[1,1]", "\"geo\":[18446744073709551615,1]")),
         ),
-        (
-            "bad_object_hash",
-            seed_model(1, |_, o, _| {
-                *o = o.replacen("\"hash\":\"", "\"hash\":\"0", 1)
-            }),
-        ),
+        ("bad_object_hash", seed_model(1, |_, o, _| *o = o.replacen("\"hash\":\"", "\"hash\":\"0", 1))),
     ]
 }
 
@@ -913,39 +748,22 @@ pub fn seg_load(data: &[u8]) -> SegOutcome {
     };
     let (w, h) = (32usize, 24usize);
     let color: Vec<u8> = (0..w * h * 3).map(|i| (i * 37 % 251) as u8).collect();
-    let depth: Vec<u16> = (0..w * h)
-        .map(|i| if i % 7 == 0 { 0 } else { 800 + (i % 50) as u16 })
-        .collect();
+    let depth: Vec<u16> = (0..w * h).map(|i| if i % 7 == 0 { 0 } else { 800 + (i % 50) as u16 }).collect();
     let frame = FrameView {
-        intrinsics: Intrinsics {
-            fx: 30.0,
-            fy: 30.0,
-            cx: 16.0,
-            cy: 12.0,
-            width: w as u32,
-            height: h as u32,
-        },
+        intrinsics: Intrinsics { fx: 30.0, fy: 30.0, cx: 16.0, cy: 12.0, width: w as u32, height: h as u32 },
         color_format: ColorFormat::Bgr8,
         color: &color,
-        depth: DepthPlane::U16 {
-            data: &depth,
-            scale: 0.001,
-        },
+        depth: DepthPlane::U16 { data: &depth, scale: 0.001 },
         labels: None,
     };
     let mut labels = vec![0u16; w * h];
     if let Err(e) = engine.segment(&frame, &mut labels) {
         panic!("segment failed on a valid frame: {e}");
     }
-    assert!(
-        labels.iter().all(|&c| c as usize <= MODEL_CLASSES),
-        "label outside the object set"
-    );
+    assert!(labels.iter().all(|&c| c as usize <= MODEL_CLASSES), "label outside the object set");
     // A wrongly sized output buffer is an error, not a panic.
     assert!(engine.segment(&frame, &mut labels[1..]).is_err());
-    SegOutcome::Segmented {
-        labelled_pixels: labels.iter().filter(|&&c| c != 0).count(),
-    }
+    SegOutcome::Segmented { labelled_pixels: labels.iter().filter(|&&c| c != 0).count() }
 }
 
 /// The smallest segmenter for `classes` objects (16x16 input, every width 1).
@@ -985,9 +803,7 @@ pub fn seed_seg(
         .enumerate()
         .map(|(t, (name, shape))| {
             let n: usize = shape.iter().product();
-            let values = (0..n)
-                .map(|i| (((i * 5 + t * 11) % 13) as f32 - 6.0) * 0.1)
-                .collect();
+            let values = (0..n).map(|i| (((i * 5 + t * 11) % 13) as f32 - 6.0) * 0.1).collect();
             (name, shape, values)
         })
         .collect();
@@ -1025,35 +841,11 @@ pub fn seg_seeds() -> Vec<(&'static str, Vec<u8>)> {
                 t.pop();
             }),
         ),
-        (
-            "bad_nan_weights",
-            seed_seg(1, |_, _, t| t[1].2[0] = f32::NAN),
-        ),
-        (
-            "bad_huge_input",
-            seed_seg(1, |c, _, _| {
-                *c = c.replace("\"input_width\":16", "\"input_width\":1000000000")
-            }),
-        ),
-        (
-            "bad_tiny_input",
-            seed_seg(1, |c, _, _| {
-                *c = c.replace("\"input_width\":16", "\"input_width\":3")
-            }),
-        ),
-        (
-            "bad_zero_width",
-            seed_seg(1, |c, _, _| *c = c.replace("\"enc\":[1,", "\"enc\":[0,")),
-        ),
-        (
-            "bad_object_count",
-            seed_seg(1, |_, o, _| {
-                *o = o[..o.find("},{").unwrap() + 1].to_string() + "]"
-            }),
-        ),
-        (
-            "bad_object_name",
-            seed_seg(1, |_, o, _| *o = o.replace("fuzz_0", "fuzz_7")),
-        ),
+        ("bad_nan_weights", seed_seg(1, |_, _, t| t[1].2[0] = f32::NAN)),
+        ("bad_huge_input", seed_seg(1, |c, _, _| *c = c.replace("\"input_width\":16", "\"input_width\":1000000000"))),
+        ("bad_tiny_input", seed_seg(1, |c, _, _| *c = c.replace("\"input_width\":16", "\"input_width\":3"))),
+        ("bad_zero_width", seed_seg(1, |c, _, _| *c = c.replace("\"enc\":[1,", "\"enc\":[0,"))),
+        ("bad_object_count", seed_seg(1, |_, o, _| *o = o[..o.find("},{").unwrap() + 1].to_string() + "]")),
+        ("bad_object_name", seed_seg(1, |_, o, _| *o = o.replace("fuzz_0", "fuzz_7"))),
     ]
 }

@@ -96,10 +96,8 @@ fn main() {
     let k = Intrinsics::YCB_VIDEO;
     let cfg = SamplerConfig { min_objects: 6, max_objects: 6, ..SamplerConfig::default() };
     let scenes: Vec<Scene> = (0..frames as u64).map(|seed| sample_scene(&set, &cfg, seed).expect("sample")).collect();
-    let tris: Vec<usize> = scenes
-        .iter()
-        .map(|s| s.render_items(&set, 0).unwrap().iter().map(|i| i.mesh.triangles.len()).sum())
-        .collect();
+    let tris: Vec<usize> =
+        scenes.iter().map(|s| s.render_items(&set, 0).unwrap().iter().map(|i| i.mesh.triangles.len()).sum()).collect();
     let mut target = RenderTarget::for_intrinsics(&k);
 
     println!("render_bench: {frames} frames, {}x{}, 6 built-in objects + table + room", k.width, k.height);

@@ -30,30 +30,14 @@ use shapes::Assembly;
 const ROUND_SEGMENTS: usize = 48;
 
 /// Names of the built-in objects in class-id order (class id = index + 1).
-pub const BUILTIN_NAMES: [&str; 8] = [
-    "cracker_box",
-    "sugar_box",
-    "tomato_soup_can",
-    "coffee_can",
-    "mustard_bottle",
-    "mug",
-    "bowl",
-    "wood_block",
-];
+pub const BUILTIN_NAMES: [&str; 8] =
+    ["cracker_box", "sugar_box", "tomato_soup_can", "coffee_can", "mustard_bottle", "mug", "bowl", "wood_block"];
 
 /// The built-in object set (class ids 1..=8 in [`BUILTIN_NAMES`] order).
 /// Deterministic: every call returns the same meshes, textures and samples.
 pub fn builtin_objects() -> ObjectSet {
-    let objects = [
-        cracker_box(),
-        sugar_box(),
-        tomato_soup_can(),
-        coffee_can(),
-        mustard_bottle(),
-        mug(),
-        bowl(),
-        wood_block(),
-    ];
+    let objects =
+        [cracker_box(), sugar_box(), tomato_soup_can(), coffee_can(), mustard_bottle(), mug(), bowl(), wood_block()];
     ObjectSet {
         objects: objects
             .into_iter()
@@ -75,12 +59,7 @@ fn linear(c: Rgb) -> [f32; 3] {
 fn box_cells() -> [UvRect; 6] {
     std::array::from_fn(|k| {
         let (col, row) = ((k % 3) as f64, (k / 3) as f64);
-        [
-            col / 3.0,
-            1.0 - (row + 1.0) / 2.0,
-            (col + 1.0) / 3.0,
-            1.0 - row / 2.0,
-        ]
+        [col / 3.0, 1.0 - (row + 1.0) / 2.0, (col + 1.0) / 3.0, 1.0 - row / 2.0]
     })
 }
 
@@ -101,9 +80,7 @@ fn cracker_box() -> Built {
     c.text_marks(ny, [0.1, 0.1, 0.9, 0.45], 5, yellow, &mut rng);
     // Back (+y): nutrition-panel-like block.
     c.fill(py, shade(red, 0.9));
-    c.paint(py, |s, t| {
-        (s > 0.1 && s < 0.6 && t > 0.15 && t < 0.85).then_some(WHITE)
-    });
+    c.paint(py, |s, t| (s > 0.1 && s < 0.6 && t > 0.15 && t < 0.85).then_some(WHITE));
     c.text_marks(py, [0.12, 0.2, 0.58, 0.8], 12, BLACK, &mut rng);
     c.text_marks(py, [0.65, 0.5, 0.92, 0.85], 4, yellow, &mut rng);
     // Sides: yellow stripe and text.
@@ -116,11 +93,7 @@ fn cracker_box() -> Built {
     }
     let mut a = Assembly::default();
     a.cuboid([0.16, 0.06, 0.21], cells);
-    (
-        "cracker_box",
-        a.finish("cracker_box", linear(red), c.into_texture()),
-        Symmetry::None,
-    )
+    ("cracker_box", a.finish("cracker_box", linear(red), c.into_texture()), Symmetry::None)
 }
 
 fn sugar_box() -> Built {
@@ -130,9 +103,7 @@ fn sugar_box() -> Built {
     let mut c = Canvas::new(768, 512, WHITE);
     let [px, nx, py, ny, pz, nz] = cells;
     c.paint(ny, |_, t| (t > 0.4).then_some(yellow));
-    c.paint(ny, |s, t| {
-        (s > 0.15 && s < 0.85 && t > 0.62 && t < 0.78).then_some(blue)
-    });
+    c.paint(ny, |s, t| (s > 0.15 && s < 0.85 && t > 0.62 && t < 0.78).then_some(blue));
     c.text_marks(ny, [0.1, 0.08, 0.9, 0.32], 4, blue, &mut rng);
     c.text_marks(py, [0.1, 0.1, 0.9, 0.9], 14, BLACK, &mut rng);
     for side in [px, nx] {
@@ -143,11 +114,7 @@ fn sugar_box() -> Built {
     c.fill(nz, shade(WHITE, 0.9));
     let mut a = Assembly::default();
     a.cuboid([0.09, 0.04, 0.175], cells);
-    (
-        "sugar_box",
-        a.finish("sugar_box", linear(yellow), c.into_texture()),
-        Symmetry::None,
-    )
+    ("sugar_box", a.finish("sugar_box", linear(yellow), c.into_texture()), Symmetry::None)
 }
 
 /// A closed can of radius `r` and height `h`: side label in the top 3/4 of
@@ -168,13 +135,7 @@ const CAN_BOTTOM: UvRect = [0.5, 0.0, 1.0, 0.25];
 /// Metal lids: concentric rings (radial coordinate is the cell's t).
 fn paint_lids(c: &mut Canvas, metal: Rgb) {
     for lid in [CAN_TOP, CAN_BOTTOM] {
-        c.paint(lid, |_, t| {
-            Some(if (t * 8.0).fract() < 0.15 {
-                shade(metal, 0.75)
-            } else {
-                metal
-            })
-        });
+        c.paint(lid, |_, t| Some(if (t * 8.0).fract() < 0.15 { shade(metal, 0.75) } else { metal }));
     }
 }
 
@@ -196,47 +157,29 @@ fn tomato_soup_can() -> Built {
     c.text_marks(CAN_LABEL, [0.05, 0.08, 0.35, 0.38], 4, red, &mut rng);
     paint_lids(&mut c, [190, 190, 195]);
     let a = can(0.033, 0.10);
-    (
-        "tomato_soup_can",
-        a.finish("tomato_soup_can", linear(red), c.into_texture()),
-        Symmetry::None,
-    )
+    ("tomato_soup_can", a.finish("tomato_soup_can", linear(red), c.into_texture()), Symmetry::None)
 }
 
 fn coffee_can() -> Built {
     let (blue, light, yellow) = ([25, 60, 150], [120, 170, 225], [240, 200, 60]);
     let mut rng = Pcg64::seed_from_u64(4);
     let mut c = Canvas::new(512, 256, blue);
-    c.paint(CAN_LABEL, |_, t| {
-        ((0.35..0.6).contains(&t)).then_some(light)
-    });
+    c.paint(CAN_LABEL, |_, t| ((0.35..0.6).contains(&t)).then_some(light));
     c.fill_rect_local(CAN_LABEL, [0.2, 0.38, 0.45, 0.57], WHITE);
     c.text_marks(CAN_LABEL, [0.22, 0.42, 0.43, 0.54], 2, blue, &mut rng);
     c.ellipse(CAN_LABEL, (0.33, 0.8), (0.08, 0.12), yellow);
     c.text_marks(CAN_LABEL, [0.6, 0.7, 0.95, 0.9], 3, WHITE, &mut rng);
     c.text_marks(CAN_LABEL, [0.6, 0.08, 0.95, 0.28], 3, WHITE, &mut rng);
     c.fill(CAN_TOP, shade(blue, 0.8));
-    c.paint(CAN_BOTTOM, |_, t| {
-        Some(if (t * 6.0).fract() < 0.2 {
-            [150, 150, 155]
-        } else {
-            [185, 185, 190]
-        })
-    });
+    c.paint(CAN_BOTTOM, |_, t| Some(if (t * 6.0).fract() < 0.2 { [150, 150, 155] } else { [185, 185, 190] }));
     let a = can(0.05, 0.14);
-    (
-        "coffee_can",
-        a.finish("coffee_can", linear(blue), c.into_texture()),
-        Symmetry::None,
-    )
+    ("coffee_can", a.finish("coffee_can", linear(blue), c.into_texture()), Symmetry::None)
 }
 
 impl Canvas {
     /// Fills the local area `[s0, t0, s1, t1]` of `rect`.
     fn fill_rect_local(&mut self, rect: UvRect, area: [f64; 4], color: Rgb) {
-        self.paint(rect, |s, t| {
-            (s >= area[0] && s <= area[2] && t >= area[1] && t <= area[3]).then_some(color)
-        });
+        self.paint(rect, |s, t| (s >= area[0] && s <= area[2] && t >= area[1] && t <= area[3]).then_some(color));
     }
 }
 
@@ -250,13 +193,7 @@ fn mustard_bottle() -> Built {
     c.text_marks(body, [0.69, 0.5, 0.81, 0.6], 2, WHITE, &mut rng);
     c.text_marks(body, [0.65, 0.2, 0.85, 0.35], 3, red, &mut rng);
     c.text_marks(body, [0.15, 0.3, 0.35, 0.7], 7, BLACK, &mut rng);
-    c.paint(cap, |s, t| {
-        Some(if (s * 24.0).fract() < 0.2 && t < 0.7 {
-            shade(red, 0.8)
-        } else {
-            red
-        })
-    });
+    c.paint(cap, |s, t| Some(if (s * 24.0).fract() < 0.2 && t < 0.7 { shade(red, 0.8) } else { red }));
     let mut a = Assembly::default();
     // Flattened body (95 x 58 mm) narrowing to a round neck.
     let profile = [
@@ -271,41 +208,18 @@ fn mustard_bottle() -> Built {
     ];
     a.lathe(&profile, ROUND_SEGMENTS, body);
     // Cap: cylinder with a flat top, then an off-centre nozzle (breaks symmetry).
-    a.lathe(
-        &[
-            (0.017, 0.017, 0.144),
-            (0.017, 0.017, 0.172),
-            (0.0, 0.0, 0.172),
-        ],
-        32,
-        cap,
-    );
+    a.lathe(&[(0.017, 0.017, 0.144), (0.017, 0.017, 0.172), (0.0, 0.0, 0.172)], 32, cap);
     let mut nozzle = Assembly::default();
-    nozzle.lathe(
-        &[
-            (0.005, 0.005, 0.172),
-            (0.004, 0.004, 0.19),
-            (0.0, 0.0, 0.19),
-        ],
-        16,
-        cap,
-    );
+    nozzle.lathe(&[(0.005, 0.005, 0.172), (0.004, 0.004, 0.19), (0.0, 0.0, 0.19)], 16, cap);
     a.append_shifted(nozzle, Vector3::new(0.008, 0.0, 0.0));
-    (
-        "mustard_bottle",
-        a.finish("mustard_bottle", linear(yellow), c.into_texture()),
-        Symmetry::None,
-    )
+    ("mustard_bottle", a.finish("mustard_bottle", linear(yellow), c.into_texture()), Symmetry::None)
 }
 
 fn mug() -> Built {
     let (teal, inner, white) = ([25, 140, 150], [120, 200, 205], [240, 240, 235]);
     let mut rng = Pcg64::seed_from_u64(6);
-    let (outside, inside, rest): (UvRect, UvRect, UvRect) = (
-        [0.0, 0.5, 1.0, 1.0],
-        [0.0, 0.25, 1.0, 0.5],
-        [0.0, 0.0, 1.0, 0.25],
-    );
+    let (outside, inside, rest): (UvRect, UvRect, UvRect) =
+        ([0.0, 0.5, 1.0, 1.0], [0.0, 0.25, 1.0, 0.5], [0.0, 0.0, 1.0, 0.25]);
     let mut c = Canvas::new(256, 256, teal);
     c.paint(outside, |_, t| (t > 0.85 && t < 0.92).then_some(white));
     // A small white logo opposite the handle (handle at +x, u = 0).
@@ -319,24 +233,9 @@ fn mug() -> Built {
     a.lathe(&[(ro, ro, 0.0), (ro, ro, h)], ROUND_SEGMENTS, outside);
     a.lathe(&[(ro, ro, h), (ri, ri, h)], ROUND_SEGMENTS, rest);
     a.lathe(&[(ri, ri, h), (ri, ri, floor)], ROUND_SEGMENTS, inside);
-    a.lathe(
-        &[(ri, ri, floor), (0.0, 0.0, floor)],
-        ROUND_SEGMENTS,
-        inside,
-    );
-    a.tube_arc(
-        Point3::new(ro, 0.0, h / 2.0),
-        0.026,
-        0.006,
-        (-FRAC_PI_2, FRAC_PI_2),
-        (16, 12),
-        rest,
-    );
-    (
-        "mug",
-        a.finish("mug", linear(teal), c.into_texture()),
-        Symmetry::None,
-    )
+    a.lathe(&[(ri, ri, floor), (0.0, 0.0, floor)], ROUND_SEGMENTS, inside);
+    a.tube_arc(Point3::new(ro, 0.0, h / 2.0), 0.026, 0.006, (-FRAC_PI_2, FRAC_PI_2), (16, 12), rest);
+    ("mug", a.finish("mug", linear(teal), c.into_texture()), Symmetry::None)
 }
 
 fn bowl() -> Built {
@@ -366,40 +265,13 @@ fn bowl() -> Built {
     };
     let (outside, inside): (UvRect, UvRect) = ([0.0, 0.0, 1.0, 0.5], [0.0, 0.5, 1.0, 1.0]);
     let mut a = Assembly::default();
-    a.lathe(
-        &[(0.0, 0.0, 0.0), (0.035, 0.035, 0.0)],
-        ROUND_SEGMENTS,
-        outside,
-    );
-    a.lathe(
-        &arc(0.035, 0.045, 0.0, 0.053, true),
-        ROUND_SEGMENTS,
-        outside,
-    );
-    a.lathe(
-        &[(0.08, 0.08, 0.053), (0.074, 0.074, 0.053)],
-        ROUND_SEGMENTS,
-        [0.0, 0.46, 1.0, 0.5],
-    );
-    a.lathe(
-        &arc(0.03, 0.044, 0.006, 0.047, false),
-        ROUND_SEGMENTS,
-        inside,
-    );
-    a.lathe(
-        &[(0.03, 0.03, 0.006), (0.0, 0.0, 0.006)],
-        ROUND_SEGMENTS,
-        inside,
-    );
-    let symmetry = Symmetry::Continuous {
-        axis: Vector3::z(),
-        origin: Point3::origin(),
-    };
-    (
-        "bowl",
-        a.finish("bowl", linear(green), c.into_texture()),
-        symmetry,
-    )
+    a.lathe(&[(0.0, 0.0, 0.0), (0.035, 0.035, 0.0)], ROUND_SEGMENTS, outside);
+    a.lathe(&arc(0.035, 0.045, 0.0, 0.053, true), ROUND_SEGMENTS, outside);
+    a.lathe(&[(0.08, 0.08, 0.053), (0.074, 0.074, 0.053)], ROUND_SEGMENTS, [0.0, 0.46, 1.0, 0.5]);
+    a.lathe(&arc(0.03, 0.044, 0.006, 0.047, false), ROUND_SEGMENTS, inside);
+    a.lathe(&[(0.03, 0.03, 0.006), (0.0, 0.0, 0.006)], ROUND_SEGMENTS, inside);
+    let symmetry = Symmetry::Continuous { axis: Vector3::z(), origin: Point3::origin() };
+    ("bowl", a.finish("bowl", linear(green), c.into_texture()), symmetry)
 }
 
 fn wood_block() -> Built {
@@ -416,37 +288,19 @@ fn wood_block() -> Built {
     // End grain: rings centred on the face (invariant under its rotations).
     c.paint(end, |s, t| {
         let r = ((s - 0.5).powi(2) + (t - 0.5).powi(2)).sqrt();
-        Some(shade(
-            wood,
-            if (r * 14.0).fract() < 0.25 {
-                0.78
-            } else {
-                0.95
-            },
-        ))
+        Some(shade(wood, if (r * 14.0).fract() < 0.25 { 0.78 } else { 0.95 }))
     });
     let size = [0.085, 0.085, 0.2];
     let mut a = Assembly::default();
     a.cuboid(size, [side, side, side, side, end, end]);
-    (
-        "wood_block",
-        a.finish("wood_block", linear(wood), c.into_texture()),
-        Symmetry::Discrete(box_symmetries(size)),
-    )
+    ("wood_block", a.finish("wood_block", linear(wood), c.into_texture()), Symmetry::Discrete(box_symmetries(size)))
 }
 
 /// The rotations (identity excluded) mapping an axis-aligned box of `size`
 /// centred at the origin onto itself: signed axis permutations with
 /// determinant +1 that only swap equal extents.
 pub fn box_symmetries(size: [f64; 3]) -> Vec<Isometry3<f64>> {
-    let perms = [
-        [0, 1, 2],
-        [0, 2, 1],
-        [1, 0, 2],
-        [1, 2, 0],
-        [2, 0, 1],
-        [2, 1, 0],
-    ];
+    let perms = [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]];
     let mut out = Vec::new();
     for p in perms {
         if (0..3).any(|k| (size[p[k]] - size[k]).abs() > 1e-9) {

@@ -16,14 +16,8 @@ pub struct Intrinsics {
 
 impl Intrinsics {
     /// The YCB-Video camera (its first intrinsic matrix), 640x480.
-    pub const YCB_VIDEO: Intrinsics = Intrinsics {
-        fx: 1066.778,
-        fy: 1067.487,
-        cx: 312.9869,
-        cy: 241.3109,
-        width: 640,
-        height: 480,
-    };
+    pub const YCB_VIDEO: Intrinsics =
+        Intrinsics { fx: 1066.778, fy: 1067.487, cx: 312.9869, cy: 241.3109, width: 640, height: 480 };
 
     /// Projects a camera-frame point (metres) to pixel coordinates; `None` behind the camera.
     pub fn project(&self, p: &nalgebra::Point3<f64>) -> Option<(f64, f64)> {

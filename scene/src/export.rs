@@ -6,9 +6,7 @@
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 
-use nalgebra::{
-    Isometry3, Matrix3, Matrix4, Point3, Rotation3, Translation3, UnitQuaternion, Vector3,
-};
+use nalgebra::{Isometry3, Matrix3, Matrix4, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use serde::{Deserialize, Serialize};
 
 use crate::model::{Mesh, ObjectSet, Symmetry};
@@ -17,22 +15,11 @@ use crate::model::{Mesh, ObjectSet, Symmetry};
 #[derive(Debug, thiserror::Error)]
 pub enum ExportError {
     #[error("{path}: cannot write: {error}")]
-    Io {
-        path: PathBuf,
-        error: std::io::Error,
-    },
+    Io { path: PathBuf, error: std::io::Error },
     #[error("{path}: cannot write image: {error}")]
-    Image {
-        path: PathBuf,
-        error: image::ImageError,
-    },
+    Image { path: PathBuf, error: image::ImageError },
     #[error("{path}: texture of {width}x{height} holds {len} bytes, expected width*height*3")]
-    BadTexture {
-        path: PathBuf,
-        width: u32,
-        height: u32,
-        len: usize,
-    },
+    BadTexture { path: PathBuf, width: u32, height: u32, len: usize },
     #[error("object name '{0}' cannot be a folder name (use letters, digits, '_', '-', '.')")]
     BadName(String),
 }
@@ -84,10 +71,9 @@ impl From<&Symmetry> for SymmetryInfo {
                     })
                     .collect(),
             },
-            Symmetry::Continuous { axis, origin } => SymmetryInfo::Continuous {
-                axis: [axis.x, axis.y, axis.z],
-                origin: [origin.x, origin.y, origin.z],
-            },
+            Symmetry::Continuous { axis, origin } => {
+                SymmetryInfo::Continuous { axis: [axis.x, axis.y, axis.z], origin: [origin.x, origin.y, origin.z] }
+            }
         }
     }
 }
@@ -110,10 +96,9 @@ impl SymmetryInfo {
                     })
                     .collect(),
             ),
-            SymmetryInfo::Continuous { axis, origin } => Symmetry::Continuous {
-                axis: Vector3::from(*axis),
-                origin: Point3::from(*origin),
-            },
+            SymmetryInfo::Continuous { axis, origin } => {
+                Symmetry::Continuous { axis: Vector3::from(*axis), origin: Point3::from(*origin) }
+            }
         }
     }
 }
@@ -139,27 +124,19 @@ fn nearest_rotation(m: Matrix3<f64>) -> Rotation3<f64> {
 impl ModelsInfo {
     /// The declared symmetry of the object called `name`, if listed.
     pub fn symmetry_of(&self, name: &str) -> Option<Symmetry> {
-        self.objects
-            .iter()
-            .find(|o| o.name == name)
-            .map(|o| o.symmetry.to_symmetry())
+        self.objects.iter().find(|o| o.name == name).map(|o| o.symmetry.to_symmetry())
     }
 }
 
 fn io_err(path: &Path) -> impl FnOnce(std::io::Error) -> ExportError + '_ {
-    move |error| ExportError::Io {
-        path: path.to_owned(),
-        error,
-    }
+    move |error| ExportError::Io { path: path.to_owned(), error }
 }
 
 fn valid_name(name: &str) -> bool {
     !name.is_empty()
         && name != "."
         && name != ".."
-        && name
-            .chars()
-            .all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
+        && name.chars().all(|c| c.is_ascii_alphanumeric() || matches!(c, '_' | '-' | '.'))
 }
 
 /// Writes every object of `set` to `dir/NAME/NAME.{obj,mtl}` (+ PNG textures)
@@ -167,10 +144,7 @@ fn valid_name(name: &str) -> bool {
 /// Returns the path of `models_info.json`.
 pub fn export_objects(set: &ObjectSet, dir: &Path) -> Result<PathBuf, ExportError> {
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
-    let mut info = ModelsInfo {
-        units: "metres".into(),
-        objects: Vec::new(),
-    };
+    let mut info = ModelsInfo { units: "metres".into(), objects: Vec::new() };
     for (i, object) in set.objects.iter().enumerate() {
         if !valid_name(&object.name) {
             return Err(ExportError::BadName(object.name.clone()));
@@ -180,11 +154,7 @@ pub fn export_objects(set: &ObjectSet, dir: &Path) -> Result<PathBuf, ExportErro
         info.objects.push(ModelInfo {
             name: object.name.clone(),
             class_id: i as u16 + 1,
-            mesh: obj
-                .strip_prefix(dir)
-                .unwrap_or(&obj)
-                .to_string_lossy()
-                .replace('\\', "/"),
+            mesh: obj.strip_prefix(dir).unwrap_or(&obj).to_string_lossy().replace('\\', "/"),
             triangles: object.mesh.triangles.len(),
             diameter: object.diameter,
             bbox_min: object.bbox_min.coords.into(),
@@ -208,32 +178,15 @@ pub fn write_obj(mesh: &Mesh, dir: &Path, stem: &str) -> Result<PathBuf, ExportE
     let mut mtl = String::new();
     for (k, m) in mesh.materials.iter().enumerate() {
         let [r, g, b] = m.diffuse;
-        let _ = writeln!(
-            mtl,
-            "newmtl m{k}\nKa 0 0 0\nKd {r} {g} {b}\nKs 0 0 0\nd 1\nillum 1"
-        );
+        let _ = writeln!(mtl, "newmtl m{k}\nKa 0 0 0\nKd {r} {g} {b}\nKs 0 0 0\nd 1\nillum 1");
         if let Some(t) = &m.texture {
             let file = format!("{stem}_m{k}.png");
             let path = dir.join(&file);
             if t.rgb.len() != t.width as usize * t.height as usize * 3 {
-                return Err(ExportError::BadTexture {
-                    path,
-                    width: t.width,
-                    height: t.height,
-                    len: t.rgb.len(),
-                });
+                return Err(ExportError::BadTexture { path, width: t.width, height: t.height, len: t.rgb.len() });
             }
-            image::save_buffer(
-                &path,
-                &t.rgb,
-                t.width,
-                t.height,
-                image::ExtendedColorType::Rgb8,
-            )
-            .map_err(|error| ExportError::Image {
-                path: path.clone(),
-                error,
-            })?;
+            image::save_buffer(&path, &t.rgb, t.width, t.height, image::ExtendedColorType::Rgb8)
+                .map_err(|error| ExportError::Image { path: path.clone(), error })?;
             let _ = writeln!(mtl, "map_Kd {file}");
         }
         mtl.push('\n');
@@ -295,8 +248,7 @@ mod tests {
     use crate::mesh_io::{load_mesh, load_object_dir};
 
     fn temp_dir(test: &str) -> PathBuf {
-        let dir =
-            std::env::temp_dir().join(format!("fusepose-export-{}-{test}", std::process::id()));
+        let dir = std::env::temp_dir().join(format!("fusepose-export-{}-{test}", std::process::id()));
         let _ = std::fs::remove_dir_all(&dir);
         dir
     }
@@ -307,35 +259,17 @@ mod tests {
         let dir = temp_dir("round-trip");
         let info_path = export_objects(&set, &dir).unwrap();
         for object in &set.objects {
-            let mesh = load_mesh(
-                &dir.join(&object.name).join(format!("{}.obj", object.name)),
-                1.0,
-            )
-            .unwrap();
-            assert_eq!(
-                mesh.positions.len(),
-                object.mesh.positions.len(),
-                "{}",
-                object.name
-            );
+            let mesh = load_mesh(&dir.join(&object.name).join(format!("{}.obj", object.name)), 1.0).unwrap();
+            assert_eq!(mesh.positions.len(), object.mesh.positions.len(), "{}", object.name);
             assert_eq!(mesh.triangles.len(), object.mesh.triangles.len());
             let (lo, hi) = crate::surface::bounding_box(&mesh);
-            assert!(
-                (lo - object.bbox_min).norm() < 1e-6 && (hi - object.bbox_max).norm() < 1e-6,
-                "{}",
-                object.name
-            );
+            assert!((lo - object.bbox_min).norm() < 1e-6 && (hi - object.bbox_max).norm() < 1e-6, "{}", object.name);
             let (a, b) = (&mesh.materials[0], &object.mesh.materials[0]);
-            assert_eq!(
-                a.texture, b.texture,
-                "{}: texture pixels differ",
-                object.name
-            );
+            assert_eq!(a.texture, b.texture, "{}: texture pixels differ", object.name);
             assert_eq!(a.diffuse, b.diffuse);
         }
         // The summary reloads with the same names, class ids and symmetries.
-        let info: ModelsInfo =
-            serde_json::from_str(&std::fs::read_to_string(&info_path).unwrap()).unwrap();
+        let info: ModelsInfo = serde_json::from_str(&std::fs::read_to_string(&info_path).unwrap()).unwrap();
         assert_eq!(info.objects.len(), set.len());
         let reloaded = load_object_dir(&dir, 1.0).unwrap();
         for (a, b) in set.objects.iter().zip(&reloaded.objects) {
@@ -344,11 +278,7 @@ mod tests {
             let (sa, sb) = (a.symmetry.sampled(4), b.symmetry.sampled(4));
             assert_eq!(sa.len(), sb.len(), "{}", a.name);
             for (x, y) in sa.iter().zip(&sb) {
-                assert!(
-                    (x.to_homogeneous() - y.to_homogeneous()).abs().max() < 1e-9,
-                    "{}",
-                    a.name
-                );
+                assert!((x.to_homogeneous() - y.to_homogeneous()).abs().max() < 1e-9, "{}", a.name);
             }
         }
     }
@@ -358,9 +288,6 @@ mod tests {
         let mut set = builtin_objects();
         set.objects.truncate(1);
         set.objects[0].name = "../escape".into();
-        assert!(matches!(
-            export_objects(&set, &temp_dir("bad-name")),
-            Err(ExportError::BadName(_))
-        ));
+        assert!(matches!(export_objects(&set, &temp_dir("bad-name")), Err(ExportError::BadName(_))));
     }
 }

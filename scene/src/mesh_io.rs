@@ -17,18 +17,11 @@ use crate::surface::{SurfaceError, compute_vertex_normals, validate_mesh};
 #[derive(Debug, thiserror::Error)]
 pub enum MeshError {
     #[error("{path}: cannot read: {error}")]
-    Io {
-        path: PathBuf,
-        error: std::io::Error,
-    },
+    Io { path: PathBuf, error: std::io::Error },
     #[error("{path}: unsupported mesh format (expected .obj or .ply)")]
     UnsupportedFormat { path: PathBuf },
     #[error("{path}{}: {message}", line.map(|l| format!(", line {l}")).unwrap_or_default())]
-    Parse {
-        path: PathBuf,
-        line: Option<usize>,
-        message: String,
-    },
+    Parse { path: PathBuf, line: Option<usize>, message: String },
     #[error("{path}: invalid mesh: {error}")]
     Invalid { path: PathBuf, error: SurfaceError },
     #[error("{path}: scale must be finite and positive, got {scale}")]
@@ -36,10 +29,7 @@ pub enum MeshError {
     #[error("{path}: no .obj or .ply mesh found")]
     NoMesh { path: PathBuf },
     #[error("{path}: bad models_info.json: {error}")]
-    ModelsInfo {
-        path: PathBuf,
-        error: serde_json::Error,
-    },
+    ModelsInfo { path: PathBuf, error: serde_json::Error },
 }
 
 /// Loads a triangle mesh, choosing the parser by extension (`.obj`, `.ply`,
@@ -48,22 +38,14 @@ pub enum MeshError {
 /// result is validated (indices, attribute lengths) before it is returned.
 pub fn load_mesh(path: &Path, scale: f64) -> Result<Mesh, MeshError> {
     if !(scale.is_finite() && scale > 0.0) {
-        return Err(MeshError::BadScale {
-            path: path.to_owned(),
-            scale,
-        });
+        return Err(MeshError::BadScale { path: path.to_owned(), scale });
     }
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .map(str::to_ascii_lowercase);
+    let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     let mut mesh = match ext.as_deref() {
         Some("obj") => obj::load_obj(path)?,
         Some("ply") => ply::load_ply(path)?,
         _ => {
-            return Err(MeshError::UnsupportedFormat {
-                path: path.to_owned(),
-            });
+            return Err(MeshError::UnsupportedFormat { path: path.to_owned() });
         }
     };
     if scale != 1.0 {
@@ -71,10 +53,7 @@ pub fn load_mesh(path: &Path, scale: f64) -> Result<Mesh, MeshError> {
             *p = p.map(|c| (c as f64 * scale) as f32);
         }
     }
-    validate_mesh(&mesh).map_err(|error| MeshError::Invalid {
-        path: path.to_owned(),
-        error,
-    })?;
+    validate_mesh(&mesh).map_err(|error| MeshError::Invalid { path: path.to_owned(), error })?;
     if mesh.normals.is_empty() {
         mesh.normals = compute_vertex_normals(&mesh);
     }
@@ -82,17 +61,9 @@ pub fn load_mesh(path: &Path, scale: f64) -> Result<Mesh, MeshError> {
 }
 
 /// Loads a mesh and precomputes its object model (samples, diameter, bbox).
-pub fn load_object(
-    path: &Path,
-    scale: f64,
-    name: &str,
-    symmetry: Symmetry,
-) -> Result<ObjectModel, MeshError> {
+pub fn load_object(path: &Path, scale: f64, name: &str, symmetry: Symmetry) -> Result<ObjectModel, MeshError> {
     let mesh = load_mesh(path, scale)?;
-    ObjectModel::from_mesh(name, mesh, symmetry).map_err(|error| MeshError::Invalid {
-        path: path.to_owned(),
-        error,
-    })
+    ObjectModel::from_mesh(name, mesh, symmetry).map_err(|error| MeshError::Invalid { path: path.to_owned(), error })
 }
 
 /// Loads every object of a directory: one object per
@@ -106,26 +77,15 @@ pub fn load_object(
 /// with [`Symmetry::None`]. Symmetry translations in that file are in
 /// metres and are multiplied by `scale` like the meshes.
 pub fn load_object_dir(dir: &Path, scale: f64) -> Result<ObjectSet, MeshError> {
-    let io = |error| MeshError::Io {
-        path: dir.to_owned(),
-        error,
-    };
+    let io = |error| MeshError::Io { path: dir.to_owned(), error };
     let info = read_models_info(dir)?;
     let mut found: Vec<(String, PathBuf)> = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io)? {
         let path = entry.map_err(io)?.path();
-        let name = path
-            .file_stem()
-            .and_then(|s| s.to_str())
-            .unwrap_or_default()
-            .to_owned();
+        let name = path.file_stem().and_then(|s| s.to_str()).unwrap_or_default().to_owned();
         if path.is_dir() {
             if let Some(mesh) = pick_mesh_file(&path)? {
-                let dir_name = path
-                    .file_name()
-                    .and_then(|s| s.to_str())
-                    .unwrap_or_default()
-                    .to_owned();
+                let dir_name = path.file_name().and_then(|s| s.to_str()).unwrap_or_default().to_owned();
                 found.push((dir_name, mesh));
             }
         } else if is_mesh_file(&path) {
@@ -133,15 +93,11 @@ pub fn load_object_dir(dir: &Path, scale: f64) -> Result<ObjectSet, MeshError> {
         }
     }
     if found.is_empty() {
-        return Err(MeshError::NoMesh {
-            path: dir.to_owned(),
-        });
+        return Err(MeshError::NoMesh { path: dir.to_owned() });
     }
     // Objects listed in models_info.json keep its class order; others follow by name.
     let class_of = |name: &str| {
-        info.as_ref()
-            .and_then(|i| i.objects.iter().find(|o| o.name == name))
-            .map_or(u32::MAX, |o| o.class_id as u32)
+        info.as_ref().and_then(|i| i.objects.iter().find(|o| o.name == name)).map_or(u32::MAX, |o| o.class_id as u32)
     };
     found.sort_by(|a, b| (class_of(&a.0), &a.0).cmp(&(class_of(&b.0), &b.0)));
     let mut set = ObjectSet::default();
@@ -151,8 +107,7 @@ pub fn load_object_dir(dir: &Path, scale: f64) -> Result<ObjectSet, MeshError> {
             .and_then(|i| i.symmetry_of(&name))
             .map(|s| scale_symmetry(s, scale))
             .unwrap_or(Symmetry::None);
-        set.objects
-            .push(load_object(&path, scale, &name, symmetry)?);
+        set.objects.push(load_object(&path, scale, &name, symmetry)?);
     }
     Ok(set)
 }
@@ -160,19 +115,13 @@ pub fn load_object_dir(dir: &Path, scale: f64) -> Result<ObjectSet, MeshError> {
 /// The object set named on a command line: `builtin` (the built-in set, in
 /// metres; `scale` is ignored) or a directory for [`load_object_dir`].
 pub fn load_object_set(source: &str, scale: f64) -> Result<ObjectSet, MeshError> {
-    if source == "builtin" {
-        Ok(crate::builtin::builtin_objects())
-    } else {
-        load_object_dir(Path::new(source), scale)
-    }
+    if source == "builtin" { Ok(crate::builtin::builtin_objects()) } else { load_object_dir(Path::new(source), scale) }
 }
 
 fn read_models_info(dir: &Path) -> Result<Option<ModelsInfo>, MeshError> {
     let path = dir.join("models_info.json");
     match std::fs::read_to_string(&path) {
-        Ok(text) => serde_json::from_str(&text)
-            .map(Some)
-            .map_err(|error| MeshError::ModelsInfo { path, error }),
+        Ok(text) => serde_json::from_str(&text).map(Some).map_err(|error| MeshError::ModelsInfo { path, error }),
         Err(e) if e.kind() == std::io::ErrorKind::NotFound => Ok(None),
         Err(error) => Err(MeshError::Io { path, error }),
     }
@@ -189,20 +138,14 @@ fn scale_symmetry(s: Symmetry, scale: f64) -> Symmetry {
                 })
                 .collect(),
         ),
-        Symmetry::Continuous { axis, origin } => Symmetry::Continuous {
-            axis,
-            origin: origin * scale,
-        },
+        Symmetry::Continuous { axis, origin } => Symmetry::Continuous { axis, origin: origin * scale },
     }
 }
 
 fn is_mesh_file(path: &Path) -> bool {
     path.is_file()
         && matches!(
-            path.extension()
-                .and_then(|e| e.to_str())
-                .map(str::to_ascii_lowercase)
-                .as_deref(),
+            path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase).as_deref(),
             Some("obj" | "ply")
         )
 }
@@ -210,10 +153,7 @@ fn is_mesh_file(path: &Path) -> bool {
 /// The mesh file of an object folder: the only one, else the first (sorted)
 /// whose name contains `textured`, else the first sorted.
 fn pick_mesh_file(dir: &Path) -> Result<Option<PathBuf>, MeshError> {
-    let io = |error| MeshError::Io {
-        path: dir.to_owned(),
-        error,
-    };
+    let io = |error| MeshError::Io { path: dir.to_owned(), error };
     let mut meshes = Vec::new();
     for entry in std::fs::read_dir(dir).map_err(io)? {
         let path = entry.map_err(io)?.path();
@@ -222,28 +162,15 @@ fn pick_mesh_file(dir: &Path) -> Result<Option<PathBuf>, MeshError> {
         }
     }
     meshes.sort();
-    let textured = meshes
-        .iter()
-        .find(|p| {
-            p.file_name()
-                .and_then(|n| n.to_str())
-                .is_some_and(|n| n.contains("textured"))
-        })
-        .cloned();
+    let textured =
+        meshes.iter().find(|p| p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.contains("textured"))).cloned();
     Ok(textured.or_else(|| meshes.into_iter().next()))
 }
 
 /// Reads a PNG or JPEG texture as RGB8, top row first.
 pub(crate) fn read_texture(path: &Path) -> Result<Texture, image::ImageError> {
-    let img = image::ImageReader::open(path)?
-        .with_guessed_format()?
-        .decode()?
-        .into_rgb8();
-    Ok(Texture {
-        width: img.width(),
-        height: img.height(),
-        rgb: img.into_raw(),
-    })
+    let img = image::ImageReader::open(path)?.with_guessed_format()?.decode()?.into_rgb8();
+    Ok(Texture { width: img.width(), height: img.height(), rgb: img.into_raw() })
 }
 
 #[cfg(test)]

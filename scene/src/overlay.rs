@@ -46,12 +46,7 @@ pub const OVERLAY_Z_NEAR_M: f64 = 0.01;
 #[derive(Debug, thiserror::Error)]
 pub enum OverlayError {
     #[error("plane has {got} elements but a {width}x{height} image needs {expected}")]
-    PlaneSize {
-        width: u32,
-        height: u32,
-        expected: usize,
-        got: usize,
-    },
+    PlaneSize { width: u32, height: u32, expected: usize, got: usize },
     #[error("writing the PNG: {0}")]
     Write(#[from] image::ImageError),
 }
@@ -70,12 +65,7 @@ pub struct OverlayObject<'a> {
 impl<'a> OverlayObject<'a> {
     /// An object drawn in its class colour.
     pub fn new(model: &'a ObjectModel, class_id: u16, pose: Pose) -> Self {
-        OverlayObject {
-            model,
-            class_id,
-            pose,
-            colour: label_colour(class_id),
-        }
+        OverlayObject { model, class_id, pose, colour: label_colour(class_id) }
     }
 
     /// The same object drawn in another colour (e.g. white for ground truth).
@@ -99,12 +89,7 @@ pub struct OverlayStyle {
 
 impl Default for OverlayStyle {
     fn default() -> Self {
-        OverlayStyle {
-            axis_fraction: 0.5,
-            silhouette: true,
-            bounding_box: false,
-            thickness: 2,
-        }
+        OverlayStyle { axis_fraction: 0.5, silhouette: true, bounding_box: false, thickness: 2 }
     }
 }
 
@@ -112,12 +97,7 @@ impl Default for OverlayStyle {
 pub fn rgb_image(width: u32, height: u32, rgb: &[u8]) -> Result<RgbImage, OverlayError> {
     let expected = width as usize * height as usize * 3;
     if rgb.len() != expected {
-        return Err(OverlayError::PlaneSize {
-            width,
-            height,
-            expected,
-            got: rgb.len(),
-        });
+        return Err(OverlayError::PlaneSize { width, height, expected, got: rgb.len() });
     }
     Ok(RgbImage::from_raw(width, height, rgb.to_vec()).expect("length checked above"))
 }
@@ -129,18 +109,9 @@ pub fn tint_labels(img: &mut RgbImage, labels: &[u16], alpha: f32) -> Result<(),
     let (width, height) = img.dimensions();
     let expected = width as usize * height as usize;
     if labels.len() != expected {
-        return Err(OverlayError::PlaneSize {
-            width,
-            height,
-            expected,
-            got: labels.len(),
-        });
+        return Err(OverlayError::PlaneSize { width, height, expected, got: labels.len() });
     }
-    let a = if alpha.is_finite() {
-        alpha.clamp(0.0, 1.0)
-    } else {
-        0.0
-    };
+    let a = if alpha.is_finite() { alpha.clamp(0.0, 1.0) } else { 0.0 };
     for (px, &label) in img.pixels_mut().zip(labels) {
         if label != 0 {
             let c = label_colour(label);
@@ -154,12 +125,7 @@ pub fn tint_labels(img: &mut RgbImage, labels: &[u16], alpha: f32) -> Result<(),
 
 /// Draws every object's silhouette outline / bounding box, then its axes on top.
 /// Parts behind the camera or outside the image are skipped; never panics.
-pub fn draw_poses(
-    img: &mut RgbImage,
-    k: &Intrinsics,
-    objects: &[OverlayObject<'_>],
-    style: &OverlayStyle,
-) {
+pub fn draw_poses(img: &mut RgbImage, k: &Intrinsics, objects: &[OverlayObject<'_>], style: &OverlayStyle) {
     let thickness = style.thickness.max(1);
     for o in objects {
         if style.silhouette {
@@ -177,36 +143,18 @@ pub fn draw_poses(
 }
 
 /// Draws the object's axes from its origin, `length_m` metres each.
-pub fn draw_axes(
-    img: &mut RgbImage,
-    k: &Intrinsics,
-    o: &OverlayObject<'_>,
-    length_m: f64,
-    thickness: u32,
-) {
+pub fn draw_axes(img: &mut RgbImage, k: &Intrinsics, o: &OverlayObject<'_>, length_m: f64, thickness: u32) {
     let origin = o.pose * Point3::origin();
     // Draw z last: it points at or away from the camera and is shortest on screen.
     for axis in 0..3 {
         let mut tip = Point3::origin();
         tip[axis] = length_m;
-        draw_segment(
-            img,
-            k,
-            &origin,
-            &(o.pose * tip),
-            AXIS_COLOURS[axis],
-            thickness,
-        );
+        draw_segment(img, k, &origin, &(o.pose * tip), AXIS_COLOURS[axis], thickness);
     }
 }
 
 /// Draws the 12 edges of the object-frame bounding box at the pose.
-pub fn draw_bounding_box(
-    img: &mut RgbImage,
-    k: &Intrinsics,
-    o: &OverlayObject<'_>,
-    thickness: u32,
-) {
+pub fn draw_bounding_box(img: &mut RgbImage, k: &Intrinsics, o: &OverlayObject<'_>, thickness: u32) {
     let (lo, hi) = (o.model.bbox_min, o.model.bbox_max);
     let corner = |i: usize| {
         o.pose
@@ -231,14 +179,10 @@ pub fn draw_bounding_box(
 pub fn draw_silhouette(img: &mut RgbImage, k: &Intrinsics, o: &OverlayObject<'_>, thickness: u32) {
     let (w, h) = img.dimensions();
     let mask = silhouette_mask(k, o, w, h);
-    let inside = |u: i64, v: i64| {
-        u >= 0 && v >= 0 && u < w as i64 && v < h as i64 && mask[(v * w as i64 + u) as usize]
-    };
+    let inside = |u: i64, v: i64| u >= 0 && v >= 0 && u < w as i64 && v < h as i64 && mask[(v * w as i64 + u) as usize];
     for v in 0..h as i64 {
         for u in 0..w as i64 {
-            if inside(u, v)
-                && !(inside(u - 1, v) && inside(u + 1, v) && inside(u, v - 1) && inside(u, v + 1))
-            {
+            if inside(u, v) && !(inside(u - 1, v) && inside(u + 1, v) && inside(u, v - 1) && inside(u, v + 1)) {
                 stamp(img, u, v, o.colour, thickness);
             }
         }
@@ -256,11 +200,7 @@ pub fn silhouette_mask(k: &Intrinsics, o: &OverlayObject<'_>, w: u32, h: u32) ->
         .iter()
         .map(|p| {
             let c = o.pose * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            if c.z < OVERLAY_Z_NEAR_M {
-                None
-            } else {
-                k.project(&c)
-            }
+            if c.z < OVERLAY_Z_NEAR_M { None } else { k.project(&c) }
         })
         .collect();
     for tri in &o.model.mesh.triangles {
@@ -275,9 +215,7 @@ pub fn silhouette_mask(k: &Intrinsics, o: &OverlayObject<'_>, w: u32, h: u32) ->
 
 /// Marks pixels whose centres lie inside (or on the edge of) the 2D triangle, either winding.
 fn fill_triangle(mask: &mut [bool], w: u32, h: u32, a: (f64, f64), b: (f64, f64), c: (f64, f64)) {
-    let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| {
-        (q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0)
-    };
+    let edge = |p: (f64, f64), q: (f64, f64), x: f64, y: f64| (q.0 - p.0) * (y - p.1) - (q.1 - p.1) * (x - p.0);
     let area = edge(a, b, c.0, c.1);
     if area == 0.0 || !area.is_finite() {
         return;
@@ -293,10 +231,7 @@ fn fill_triangle(mask: &mut [bool], w: u32, h: u32, a: (f64, f64), b: (f64, f64)
     for v in v0 as u32..=v1 as u32 {
         for u in u0 as u32..=u1 as u32 {
             let (x, y) = (u as f64, v as f64);
-            if s * edge(a, b, x, y) >= 0.0
-                && s * edge(b, c, x, y) >= 0.0
-                && s * edge(c, a, x, y) >= 0.0
-            {
+            if s * edge(a, b, x, y) >= 0.0 && s * edge(b, c, x, y) >= 0.0 && s * edge(c, a, x, y) >= 0.0 {
                 mask[v as usize * w as usize + u as usize] = true;
             }
         }
@@ -305,14 +240,7 @@ fn fill_triangle(mask: &mut [bool], w: u32, h: u32, a: (f64, f64), b: (f64, f64)
 
 /// Projects a camera-frame segment and draws it; skipped when either end is
 /// nearer than [`OVERLAY_Z_NEAR_M`].
-fn draw_segment(
-    img: &mut RgbImage,
-    k: &Intrinsics,
-    p: &Point3<f64>,
-    q: &Point3<f64>,
-    colour: [u8; 3],
-    thickness: u32,
-) {
+fn draw_segment(img: &mut RgbImage, k: &Intrinsics, p: &Point3<f64>, q: &Point3<f64>, colour: [u8; 3], thickness: u32) {
     if p.z < OVERLAY_Z_NEAR_M || q.z < OVERLAY_Z_NEAR_M {
         return;
     }
@@ -323,13 +251,7 @@ fn draw_segment(
 
 /// A line between pixel coordinates, clipped to the image first so far-away
 /// end points cost nothing (Liang–Barsky), then walked with Bresenham.
-pub fn draw_line(
-    img: &mut RgbImage,
-    a: (f64, f64),
-    b: (f64, f64),
-    colour: [u8; 3],
-    thickness: u32,
-) {
+pub fn draw_line(img: &mut RgbImage, a: (f64, f64), b: (f64, f64), colour: [u8; 3], thickness: u32) {
     let (w, h) = img.dimensions();
     let Some((a, b)) = clip(a, b, w as f64 - 1.0, h as f64 - 1.0) else {
         return;
@@ -377,10 +299,7 @@ fn clip(a: (f64, f64), b: (f64, f64), xmax: f64, ymax: f64) -> Option<((f64, f64
             }
         }
     }
-    (t0 <= t1).then_some((
-        (a.0 + t0 * dx, a.1 + t0 * dy),
-        (a.0 + t1 * dx, a.1 + t1 * dy),
-    ))
+    (t0 <= t1).then_some(((a.0 + t0 * dx, a.1 + t0 * dy), (a.0 + t1 * dx, a.1 + t1 * dy)))
 }
 
 /// Paints a `thickness`-wide square centred on (u, v), clipped to the image.

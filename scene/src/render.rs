@@ -72,10 +72,7 @@ impl Default for Lighting {
     fn default() -> Self {
         Lighting {
             ambient: [0.35; 3],
-            lights: vec![DirectionalLight {
-                direction: Vector3::new(0.3, -0.7, -0.65).normalize(),
-                color: [0.75; 3],
-            }],
+            lights: vec![DirectionalLight { direction: Vector3::new(0.3, -0.7, -0.65).normalize(), color: [0.75; 3] }],
         }
     }
 }
@@ -106,11 +103,16 @@ impl Lighting {
         let total: f32 = rng.random_range(0.35..0.8);
         let mut lights = Vec::with_capacity(n_lights);
         for i in 0..n_lights {
-            let share = if n_lights == 1 { 1.0 } else if i == 0 { 0.65 } else { 0.35 };
+            let share = if n_lights == 1 {
+                1.0
+            } else if i == 0 {
+                0.65
+            } else {
+                0.35
+            };
             let elev = rng.random_range(25f64..90.0).to_radians();
             let azim = rng.random_range(0.0..std::f64::consts::TAU);
-            let direction =
-                Vector3::new(elev.cos() * azim.cos(), elev.cos() * azim.sin(), elev.sin());
+            let direction = Vector3::new(elev.cos() * azim.cos(), elev.cos() * azim.sin(), elev.sin());
             lights.push(DirectionalLight { direction, color: tint(rng, total * share, 0.08) });
         }
         Lighting { ambient, lights }
@@ -198,9 +200,7 @@ pub fn render_scene(
     }
     for (i, item) in items.iter().enumerate() {
         let p = &item.pose;
-        if !(p.translation.vector.iter().all(|v| v.is_finite())
-            && p.rotation.coords.iter().all(|v| v.is_finite()))
-        {
+        if !(p.translation.vector.iter().all(|v| v.is_finite()) && p.rotation.coords.iter().all(|v| v.is_finite())) {
             return Err(RenderError::BadPose { item: i });
         }
         validate_mesh(item.mesh).map_err(|reason| RenderError::BadMesh { item: i, reason })?;

@@ -203,7 +203,8 @@ impl SamplerConfig {
         if !(e0 > 0.0 && e1 >= e0 && e1 < 89.5) {
             return Err(E("camera_elevation_deg must be 0 < min <= max < 89.5"));
         }
-        if !(self.camera_max_roll_deg.is_finite() && self.look_at_jitter_m.is_finite() && self.look_at_jitter_m >= 0.0) {
+        if !(self.camera_max_roll_deg.is_finite() && self.look_at_jitter_m.is_finite() && self.look_at_jitter_m >= 0.0)
+        {
             return Err(E("camera_max_roll_deg and look_at_jitter_m must be finite (jitter >= 0)"));
         }
         if self.views == 0 {
@@ -402,8 +403,13 @@ impl OcclusionProbe {
     fn miss(&mut self, set: &ObjectSet, objects: &[PlacedObject], cam: &Pose) -> Result<f64, SamplerError> {
         let mut items = Vec::with_capacity(objects.len());
         for (i, o) in objects.iter().enumerate() {
-            let model = set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
-            items.push(RenderItem { mesh: &model.mesh, pose: cam * o.table_from_object, instance_label: o.instance_label });
+            let model =
+                set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
+            items.push(RenderItem {
+                mesh: &model.mesh,
+                pose: cam * o.table_from_object,
+                instance_label: o.instance_label,
+            });
         }
         render::render_scene(&items, &self.k, &self.settings, &mut self.target)?;
         let (lo, hi) = self.range;
@@ -413,7 +419,13 @@ impl OcclusionProbe {
                 continue;
             }
             let hidden = 1.0 - c.visible_fraction();
-            let d = if hidden < lo { lo - hidden } else if hidden > hi { hidden - hi } else { 0.0 };
+            let d = if hidden < lo {
+                lo - hidden
+            } else if hidden > hi {
+                hidden - hi
+            } else {
+                0.0
+            };
             best = best.min(d);
         }
         Ok(best)
@@ -432,7 +444,13 @@ impl Scene {
     /// Appends `count` more camera views drawn from `seed` with the camera
     /// rules of `cfg` (distance, elevation, roll, occlusion target), e.g. for
     /// multi-frame scenes. Deterministic for the scene, config and seed.
-    pub fn add_views(&mut self, set: &ObjectSet, cfg: &SamplerConfig, count: usize, seed: u64) -> Result<(), SamplerError> {
+    pub fn add_views(
+        &mut self,
+        set: &ObjectSet,
+        cfg: &SamplerConfig,
+        count: usize,
+        seed: u64,
+    ) -> Result<(), SamplerError> {
         cfg.validate()?;
         let mut rng = Pcg64Mcg::seed_from_u64(seed ^ self.seed.rotate_left(17));
         let views = draw_views(&mut rng, set, &self.objects, cfg, count)?;
@@ -458,8 +476,13 @@ impl Scene {
         items.push(RenderItem { mesh: &self.backdrop.table, pose: cam, instance_label: 0 });
         items.push(RenderItem { mesh: &self.backdrop.room, pose: cam, instance_label: 0 });
         for (i, o) in self.objects.iter().enumerate() {
-            let model = set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
-            items.push(RenderItem { mesh: &model.mesh, pose: cam * o.table_from_object, instance_label: o.instance_label });
+            let model =
+                set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
+            items.push(RenderItem {
+                mesh: &model.mesh,
+                pose: cam * o.table_from_object,
+                instance_label: o.instance_label,
+            });
         }
         Ok(items)
     }

@@ -20,38 +20,17 @@ pub enum SurfaceError {
     #[error("mesh has no triangles")]
     NoTriangles,
     #[error("triangle {triangle} refers to vertex {index}, but the mesh has {vertices} vertices")]
-    IndexOutOfRange {
-        triangle: usize,
-        index: u32,
-        vertices: usize,
-    },
+    IndexOutOfRange { triangle: usize, index: u32, vertices: usize },
     #[error("vertex {0} has a non-finite coordinate")]
     NonFinitePosition(usize),
-    #[error(
-        "per-vertex {attribute} has {len} entries for {vertices} vertices (must be 0 or equal)"
-    )]
-    AttributeLength {
-        attribute: &'static str,
-        len: usize,
-        vertices: usize,
-    },
+    #[error("per-vertex {attribute} has {len} entries for {vertices} vertices (must be 0 or equal)")]
+    AttributeLength { attribute: &'static str, len: usize, vertices: usize },
     #[error("triangle_materials has {len} entries for {triangles} triangles (must be 0 or equal)")]
     MaterialListLength { len: usize, triangles: usize },
     #[error("triangle {triangle} uses material {material}, but the mesh has {materials} materials")]
-    MaterialOutOfRange {
-        triangle: usize,
-        material: u32,
-        materials: usize,
-    },
-    #[error(
-        "texture of material {material} is {width}x{height} but holds {len} bytes (expected w*h*3)"
-    )]
-    TextureSize {
-        material: usize,
-        width: u32,
-        height: u32,
-        len: usize,
-    },
+    MaterialOutOfRange { triangle: usize, material: u32, materials: usize },
+    #[error("texture of material {material} is {width}x{height} but holds {len} bytes (expected w*h*3)")]
+    TextureSize { material: usize, width: u32, height: u32, len: usize },
     #[error("mesh surface area is zero")]
     ZeroArea,
 }
@@ -63,60 +42,31 @@ pub fn validate_mesh(mesh: &Mesh) -> Result<(), SurfaceError> {
     if mesh.triangles.is_empty() {
         return Err(SurfaceError::NoTriangles);
     }
-    for (attribute, len) in [
-        ("normals", mesh.normals.len()),
-        ("uvs", mesh.uvs.len()),
-        ("colors", mesh.colors.len()),
-    ] {
+    for (attribute, len) in [("normals", mesh.normals.len()), ("uvs", mesh.uvs.len()), ("colors", mesh.colors.len())] {
         if len != 0 && len != n {
-            return Err(SurfaceError::AttributeLength {
-                attribute,
-                len,
-                vertices: n,
-            });
+            return Err(SurfaceError::AttributeLength { attribute, len, vertices: n });
         }
     }
-    if let Some(i) = mesh
-        .positions
-        .iter()
-        .position(|p| p.iter().any(|c| !c.is_finite()))
-    {
+    if let Some(i) = mesh.positions.iter().position(|p| p.iter().any(|c| !c.is_finite())) {
         return Err(SurfaceError::NonFinitePosition(i));
     }
     for (t, tri) in mesh.triangles.iter().enumerate() {
         if let Some(&index) = tri.iter().find(|&&i| i as usize >= n) {
-            return Err(SurfaceError::IndexOutOfRange {
-                triangle: t,
-                index,
-                vertices: n,
-            });
+            return Err(SurfaceError::IndexOutOfRange { triangle: t, index, vertices: n });
         }
     }
     let tm = &mesh.triangle_materials;
     if !tm.is_empty() {
         if tm.len() != mesh.triangles.len() {
-            return Err(SurfaceError::MaterialListLength {
-                len: tm.len(),
-                triangles: mesh.triangles.len(),
-            });
+            return Err(SurfaceError::MaterialListLength { len: tm.len(), triangles: mesh.triangles.len() });
         }
-        if let Some((t, &material)) = tm
-            .iter()
-            .enumerate()
-            .find(|(_, m)| **m as usize >= mesh.materials.len())
-        {
-            return Err(SurfaceError::MaterialOutOfRange {
-                triangle: t,
-                material,
-                materials: mesh.materials.len(),
-            });
+        if let Some((t, &material)) = tm.iter().enumerate().find(|(_, m)| **m as usize >= mesh.materials.len()) {
+            return Err(SurfaceError::MaterialOutOfRange { triangle: t, material, materials: mesh.materials.len() });
         }
     }
     for (i, m) in mesh.materials.iter().enumerate() {
         if let Some(tex) = &m.texture
-            && (tex.rgb.len() != tex.width as usize * tex.height as usize * 3
-                || tex.width == 0
-                || tex.height == 0)
+            && (tex.rgb.len() != tex.width as usize * tex.height as usize * 3 || tex.width == 0 || tex.height == 0)
         {
             return Err(SurfaceError::TextureSize {
                 material: i,
@@ -173,19 +123,12 @@ pub fn compute_vertex_normals(mesh: &Mesh) -> Vec<[f32; 3]> {
 
 /// Total triangle area (square metres). Indices must be valid.
 pub fn surface_area(mesh: &Mesh) -> f64 {
-    mesh.triangles
-        .iter()
-        .map(|t| 0.5 * face_cross(&corners(mesh, *t)).norm())
-        .sum()
+    mesh.triangles.iter().map(|t| 0.5 * face_cross(&corners(mesh, *t)).norm()).sum()
 }
 
 /// `count` points drawn uniformly over the surface (area-weighted triangle
 /// choice, uniform barycentric point), deterministic for a given `seed`.
-pub fn sample_surface(
-    mesh: &Mesh,
-    count: usize,
-    seed: u64,
-) -> Result<Vec<Point3<f64>>, SurfaceError> {
+pub fn sample_surface(mesh: &Mesh, count: usize, seed: u64) -> Result<Vec<Point3<f64>>, SurfaceError> {
     validate_mesh(mesh)?;
     let mut cumulative = Vec::with_capacity(mesh.triangles.len());
     let mut total = 0.0;
@@ -200,9 +143,7 @@ pub fn sample_surface(
     let mut out = Vec::with_capacity(count);
     for _ in 0..count {
         let target = rng.random::<f64>() * total;
-        let k = cumulative
-            .partition_point(|&c| c <= target)
-            .min(cumulative.len() - 1);
+        let k = cumulative.partition_point(|&c| c <= target).min(cumulative.len() - 1);
         let c = corners(mesh, mesh.triangles[k]);
         let (r1, r2): (f64, f64) = (rng.random(), rng.random());
         let s = r1.sqrt();
@@ -221,10 +162,7 @@ pub fn diameter(points: &[Point3<f64>]) -> f64 {
         return 0.0;
     }
     let centroid = points.iter().fold(Vector3::zeros(), |a, p| a + p.coords) / points.len() as f64;
-    let mut by_radius: Vec<(f64, Point3<f64>)> = points
-        .iter()
-        .map(|p| ((p.coords - centroid).norm(), *p))
-        .collect();
+    let mut by_radius: Vec<(f64, Point3<f64>)> = points.iter().map(|p| ((p.coords - centroid).norm(), *p)).collect();
     by_radius.sort_by(|a, b| b.0.total_cmp(&a.0));
     let mut best_sq = 0.0f64;
     for i in 0..by_radius.len() {
@@ -263,12 +201,7 @@ fn used_vertices(mesh: &Mesh) -> Vec<Point3<f64>> {
             }
         }
     }
-    mesh.positions
-        .iter()
-        .zip(used)
-        .filter(|(_, u)| *u)
-        .map(|(p, _)| point(*p))
-        .collect()
+    mesh.positions.iter().zip(used).filter(|(_, u)| *u).map(|(p, _)| point(*p)).collect()
 }
 
 impl ObjectModel {
@@ -276,11 +209,7 @@ impl ObjectModel {
     /// absent, and precomputes [`SURFACE_SAMPLES`] surface samples, the exact
     /// diameter (over the mesh vertices, which span the convex hull) and the bbox.
     /// The mesh keeps its own frame (no re-centring).
-    pub fn from_mesh(
-        name: impl Into<String>,
-        mut mesh: Mesh,
-        symmetry: Symmetry,
-    ) -> Result<Self, SurfaceError> {
+    pub fn from_mesh(name: impl Into<String>, mut mesh: Mesh, symmetry: Symmetry) -> Result<Self, SurfaceError> {
         validate_mesh(&mesh)?;
         if mesh.normals.is_empty() {
             mesh.normals = compute_vertex_normals(&mesh);
@@ -288,15 +217,7 @@ impl ObjectModel {
         let samples = sample_surface(&mesh, SURFACE_SAMPLES, SURFACE_SAMPLE_SEED)?;
         let diameter = diameter(&used_vertices(&mesh));
         let (bbox_min, bbox_max) = bounding_box(&mesh);
-        Ok(ObjectModel {
-            name: name.into(),
-            mesh,
-            symmetry,
-            samples,
-            diameter,
-            bbox_min,
-            bbox_max,
-        })
+        Ok(ObjectModel { name: name.into(), mesh, symmetry, samples, diameter, bbox_min, bbox_max })
     }
 }
 
@@ -331,17 +252,12 @@ pub(crate) mod tests {
             [0, 4, 7],
             [0, 7, 3], // -x
         ];
-        Mesh {
-            positions,
-            triangles,
-            ..Default::default()
-        }
+        Mesh { positions, triangles, ..Default::default() }
     }
 
     #[test]
     fn unit_cube_samples_lie_on_faces() {
-        let model =
-            ObjectModel::from_mesh("cube", box_mesh([1.0, 1.0, 1.0]), Symmetry::None).unwrap();
+        let model = ObjectModel::from_mesh("cube", box_mesh([1.0, 1.0, 1.0]), Symmetry::None).unwrap();
         assert_eq!(model.samples.len(), SURFACE_SAMPLES);
         for p in &model.samples {
             let on_face = p.coords.iter().any(|c| (c.abs() - 0.5).abs() < 1e-9);
@@ -349,15 +265,8 @@ pub(crate) mod tests {
             assert!(on_face && inside, "{p} is not on the cube surface");
         }
         // Area-weighted: every face gets about 1/6 of the samples.
-        let on_top = model
-            .samples
-            .iter()
-            .filter(|p| (p.z - 0.5).abs() < 1e-9)
-            .count();
-        assert!(
-            (250..420).contains(&on_top),
-            "top face got {on_top} of 2000"
-        );
+        let on_top = model.samples.iter().filter(|p| (p.z - 0.5).abs() < 1e-9).count();
+        assert!((250..420).contains(&on_top), "top face got {on_top} of 2000");
     }
 
     #[test]
@@ -369,14 +278,9 @@ pub(crate) mod tests {
 
     #[test]
     fn box_diameter_and_bbox_are_exact() {
-        let model =
-            ObjectModel::from_mesh("box", box_mesh([0.16, 0.06, 0.21]), Symmetry::None).unwrap();
+        let model = ObjectModel::from_mesh("box", box_mesh([0.16, 0.06, 0.21]), Symmetry::None).unwrap();
         let expected = (0.16f64.powi(2) + 0.06f64.powi(2) + 0.21f64.powi(2)).sqrt();
-        assert!(
-            (model.diameter - expected).abs() < 1e-6,
-            "{} vs {expected}",
-            model.diameter
-        );
+        assert!((model.diameter - expected).abs() < 1e-6, "{} vs {expected}", model.diameter);
         assert!((model.bbox_max.x - 0.08).abs() < 1e-7 && (model.bbox_min.z + 0.105).abs() < 1e-7);
     }
 
@@ -407,20 +311,11 @@ pub(crate) mod tests {
     fn bad_meshes_are_errors_not_panics() {
         let mut m = box_mesh([1.0, 1.0, 1.0]);
         m.triangles.push([0, 1, 99]);
-        assert!(matches!(
-            validate_mesh(&m),
-            Err(SurfaceError::IndexOutOfRange { index: 99, .. })
-        ));
-        assert_eq!(
-            validate_mesh(&Mesh::default()),
-            Err(SurfaceError::NoTriangles)
-        );
+        assert!(matches!(validate_mesh(&m), Err(SurfaceError::IndexOutOfRange { index: 99, .. })));
+        assert_eq!(validate_mesh(&Mesh::default()), Err(SurfaceError::NoTriangles));
         let mut flat = box_mesh([1.0, 1.0, 1.0]);
         flat.positions.iter_mut().for_each(|p| *p = [0.0; 3]);
-        assert!(matches!(
-            ObjectModel::from_mesh("f", flat, Symmetry::None),
-            Err(SurfaceError::ZeroArea)
-        ));
+        assert!(matches!(ObjectModel::from_mesh("f", flat, Symmetry::None), Err(SurfaceError::ZeroArea)));
         let mut nan = box_mesh([1.0, 1.0, 1.0]);
         nan.positions[3][1] = f32::NAN;
         assert_eq!(validate_mesh(&nan), Err(SurfaceError::NonFinitePosition(3)));

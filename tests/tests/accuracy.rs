@@ -8,10 +8,10 @@ use std::time::Duration;
 use fusepose_client::{
     ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, LabelFormat, LabelsMut, Producer,
 };
+use fusepose_scene::Intrinsics;
 use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{FrameTruth, LabelKind, SamplerConfig, render_view_labelled, sample_scene};
-use fusepose_scene::Intrinsics;
 use fusepose_tests::*;
 
 /// Objects at least this visible are scored.
@@ -22,8 +22,6 @@ const CORRECT_FRACTION_OF_DIAMETER: f64 = 0.1;
 const MIN_CORRECT_SHARE: f64 = 0.8;
 /// Median ADD-S bound, metres (measured: 2.8 mm over 29 objects of 6 frames).
 const MAX_MEDIAN_ADD_S_M: f64 = 0.01;
-
-
 
 #[test]
 fn icp_poses_match_rendered_ground_truth() -> anyhow::Result<()> {
@@ -52,9 +50,16 @@ fn icp_poses_match_rendered_ground_truth() -> anyhow::Result<()> {
     for seed in 0..3u64 {
         let scene = sample_scene(&objects, &sampler, 1000 + seed).map_err(|e| anyhow::anyhow!("{e}"))?;
         for view in 0..scene.views.len() {
-            let truth: FrameTruth =
-                render_view_labelled(&scene, &objects, view, &k, &NoiseConfig::default(), LabelKind::Class, &mut target)
-                    .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let truth: FrameTruth = render_view_labelled(
+                &scene,
+                &objects,
+                view,
+                &k,
+                &NoiseConfig::default(),
+                LabelKind::Class,
+                &mut target,
+            )
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
             let mut frame = producer.loan()?;
             frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
             let planes = frame.planes_mut();
@@ -82,7 +87,9 @@ fn icp_poses_match_rendered_ground_truth() -> anyhow::Result<()> {
     }
     errors_mm.sort_by(f64::total_cmp);
     let median = errors_mm.get(errors_mm.len() / 2).copied().unwrap_or(f64::NAN);
-    eprintln!("ADD-S over {scored} objects: {correct} correct (< 10% diameter), median {median:.1} mm, all {errors_mm:.1?}");
+    eprintln!(
+        "ADD-S over {scored} objects: {correct} correct (< 10% diameter), median {median:.1} mm, all {errors_mm:.1?}"
+    );
     assert!(scored >= 6, "too few visible objects scored: {scored}");
     assert!(median < MAX_MEDIAN_ADD_S_M * 1e3, "median ADD-S {median:.1} mm");
     assert!(

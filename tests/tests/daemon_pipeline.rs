@@ -27,9 +27,8 @@ fn every_pose_message_matches_a_sent_frame() -> anyhow::Result<()> {
 
     for consumer in &consumers {
         let mut lines = Vec::new();
-        let saw_last = consumer.collect_until(&mut lines, Duration::from_secs(15), |l| {
-            pose_lines(l).iter().any(|p| p.sequence == last)
-        });
+        let saw_last = consumer
+            .collect_until(&mut lines, Duration::from_secs(15), |l| pose_lines(l).iter().any(|p| p.sequence == last));
         let poses = pose_lines(&lines);
         assert!(saw_last, "consumer never saw the last frame's poses; got {} messages", poses.len());
         for p in &poses {

@@ -16,9 +16,7 @@ use std::path::{Path, PathBuf};
 use harness::{FrameOutcome, ModelOutcome, SegOutcome};
 
 fn corpus(target: &str) -> Vec<(String, Vec<u8>)> {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR"))
-        .join("../fuzz/corpus")
-        .join(target);
+    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus").join(target);
     let mut files: Vec<PathBuf> = std::fs::read_dir(&dir)
         .unwrap_or_else(|e| panic!("{}: {e}", dir.display()))
         .map(|e| e.unwrap().path())
@@ -28,12 +26,7 @@ fn corpus(target: &str) -> Vec<(String, Vec<u8>)> {
     assert!(!files.is_empty(), "{} is empty", dir.display());
     files
         .into_iter()
-        .map(|p| {
-            (
-                p.file_name().unwrap().to_string_lossy().into_owned(),
-                std::fs::read(&p).unwrap(),
-            )
-        })
+        .map(|p| (p.file_name().unwrap().to_string_lossy().into_owned(), std::fs::read(&p).unwrap()))
         .collect()
 }
 
@@ -52,21 +45,12 @@ fn frame_corpus_replays_without_panics_and_seeds_keep_their_outcome() {
             let k: usize = rest.split('_').next().unwrap().parse().unwrap();
             assert_eq!(outcome, FrameOutcome::Prepared(k), "{name}");
         } else if name.starts_with("refused_") {
-            assert!(
-                matches!(outcome, FrameOutcome::Refused(_)),
-                "{name}: {outcome:?}"
-            );
+            assert!(matches!(outcome, FrameOutcome::Refused(_)), "{name}: {outcome:?}");
         } else if name.starts_with("reject_") {
-            assert!(
-                matches!(outcome, FrameOutcome::Rejected(_)),
-                "{name}: {outcome:?}"
-            );
+            assert!(matches!(outcome, FrameOutcome::Rejected(_)), "{name}: {outcome:?}");
         }
     }
-    assert!(
-        prepared >= 5 && rejected >= 10,
-        "{prepared} prepared, {rejected} rejected"
-    );
+    assert!(prepared >= 5 && rejected >= 10, "{prepared} prepared, {rejected} rejected");
 }
 
 #[test]
@@ -94,11 +78,7 @@ fn frame_seed_rejections_name_their_reason() {
     let seeds = harness::frame_seeds();
     for (name, reason) in expect {
         let (_, bytes) = seeds.iter().find(|(n, _)| *n == name).unwrap();
-        assert_eq!(
-            harness::frame_path(bytes),
-            FrameOutcome::Rejected(reason),
-            "{name}"
-        );
+        assert_eq!(harness::frame_path(bytes), FrameOutcome::Rejected(reason), "{name}");
     }
     // Decoded, then refused by the daemon's content check with its own reason.
     use fusepose_estimator::FrameError as F;
@@ -127,15 +107,9 @@ fn model_corpus_replays_without_panics_and_seeds_keep_their_outcome() {
             loaded += 1;
         }
         if name.starts_with("valid_") {
-            assert!(
-                matches!(outcome, ModelOutcome::Loaded { poses: 1 }),
-                "{name}: {outcome:?}"
-            );
+            assert!(matches!(outcome, ModelOutcome::Loaded { poses: 1 }), "{name}: {outcome:?}");
         } else if name.starts_with("bad_") {
-            assert!(
-                matches!(outcome, ModelOutcome::Refused(_)),
-                "{name}: {outcome:?}"
-            );
+            assert!(matches!(outcome, ModelOutcome::Refused(_)), "{name}: {outcome:?}");
         }
     }
     assert!(loaded >= 2, "{loaded} loaded");
@@ -159,19 +133,10 @@ fn model_seed_errors_are_the_specific_ones() {
     assert!(matches!(outcome("bad_missing_tensor"), E::MissingTensor(_)));
     assert!(matches!(outcome("bad_config_json"), E::BadMetadata { .. }));
     assert!(matches!(outcome("bad_zero_width"), E::BadMetadata { .. }));
-    assert!(matches!(
-        outcome("bad_crop_not_div4"),
-        E::BadMetadata { .. }
-    ));
+    assert!(matches!(outcome("bad_crop_not_div4"), E::BadMetadata { .. }));
     assert!(matches!(outcome("bad_object_count"), E::BadMetadata { .. }));
-    assert!(matches!(
-        outcome("bad_object_name"),
-        E::ObjectMismatch { what: "name", .. }
-    ));
-    assert!(matches!(
-        outcome("bad_object_hash"),
-        E::ObjectMismatch { .. }
-    ));
+    assert!(matches!(outcome("bad_object_name"), E::ObjectMismatch { what: "name", .. }));
+    assert!(matches!(outcome("bad_object_hash"), E::ObjectMismatch { .. }));
 }
 
 #[test]
@@ -183,15 +148,9 @@ fn seg_corpus_replays_without_panics_and_seeds_keep_their_outcome() {
             segmented += 1;
         }
         if name.starts_with("valid_") {
-            assert!(
-                matches!(outcome, SegOutcome::Segmented { .. }),
-                "{name}: {outcome:?}"
-            );
+            assert!(matches!(outcome, SegOutcome::Segmented { .. }), "{name}: {outcome:?}");
         } else if name.starts_with("bad_") {
-            assert!(
-                matches!(outcome, SegOutcome::Refused(_)),
-                "{name}: {outcome:?}"
-            );
+            assert!(matches!(outcome, SegOutcome::Refused(_)), "{name}: {outcome:?}");
         }
     }
     assert!(segmented >= 2, "{segmented} segmented");
@@ -199,21 +158,14 @@ fn seg_corpus_replays_without_panics_and_seeds_keep_their_outcome() {
 
 #[test]
 fn seed_files_match_the_generator() {
-    for (target, seeds) in [
-        ("frame", harness::frame_seeds()),
-        ("model", harness::model_seeds()),
-        ("seg", harness::seg_seeds()),
-    ] {
+    for (target, seeds) in
+        [("frame", harness::frame_seeds()), ("model", harness::model_seeds()), ("seg", harness::seg_seeds())]
+    {
         let on_disk = corpus(target);
         for (name, bytes) in seeds {
             let file = on_disk.iter().find(|(n, _)| n == name);
-            let file = file.unwrap_or_else(|| {
-                panic!("fuzz/corpus/{target}/{name} is missing; run gen_corpus")
-            });
-            assert!(
-                file.1 == bytes,
-                "fuzz/corpus/{target}/{name} differs from the generator; run gen_corpus"
-            );
+            let file = file.unwrap_or_else(|| panic!("fuzz/corpus/{target}/{name} is missing; run gen_corpus"));
+            assert!(file.1 == bytes, "fuzz/corpus/{target}/{name} differs from the generator; run gen_corpus");
         }
     }
 }
@@ -223,10 +175,6 @@ fn corpora_stay_small() {
     for target in ["frame", "model", "seg"] {
         let files = corpus(target);
         let total: usize = files.iter().map(|(_, b)| b.len()).sum();
-        assert!(
-            files.len() <= 60 && total <= 256 * 1024,
-            "{target}: {} files, {total} bytes",
-            files.len()
-        );
+        assert!(files.len() <= 60 && total <= 256 * 1024, "{target}: {} files, {total} bytes", files.len());
     }
 }

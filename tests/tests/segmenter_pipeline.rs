@@ -8,13 +8,11 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use fusepose_client::{
-    ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, Producer, Stage,
-};
+use fusepose_client::{ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, Producer, Stage};
+use fusepose_scene::Intrinsics;
 use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
-use fusepose_scene::Intrinsics;
 use fusepose_tests::*;
 
 /// Objects at least this visible are expected in the answer.
@@ -25,8 +23,6 @@ const MIN_FOUND_SHARE: f64 = 0.7;
 fn weights() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors")
 }
-
-
 
 #[test]
 fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
@@ -39,11 +35,7 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
     let _daemon = start_daemon(&env, &config)?;
 
     let objects = fusepose_scene::builtin::builtin_objects();
-    let metrics: Vec<ObjectMetric> = objects
-        .objects
-        .iter()
-        .map(|m| ObjectMetric::for_model(m).unwrap())
-        .collect();
+    let metrics: Vec<ObjectMetric> = objects.objects.iter().map(|m| ObjectMetric::for_model(m).unwrap()).collect();
     let k = Intrinsics::YCB_VIDEO;
     let layout = FrameLayout {
         width: k.width,
@@ -60,18 +52,11 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
 
     let (mut expected, mut found, mut frames) = (0usize, 0usize, 0u64);
     for seed in 0..3u64 {
-        let scene = sample_scene(&objects, &SamplerConfig::default(), 2000 + seed)
-            .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let truth = render_view_labelled(
-            &scene,
-            &objects,
-            0,
-            &k,
-            &NoiseConfig::default(),
-            LabelKind::Class,
-            &mut target,
-        )
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+        let scene =
+            sample_scene(&objects, &SamplerConfig::default(), 2000 + seed).map_err(|e| anyhow::anyhow!("{e}"))?;
+        let truth =
+            render_view_labelled(&scene, &objects, 0, &k, &NoiseConfig::default(), LabelKind::Class, &mut target)
+                .map_err(|e| anyhow::anyhow!("{e}"))?;
         let mut frame = producer.loan()?;
         frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
         let planes = frame.planes_mut();
@@ -84,15 +69,8 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
         let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
         frames += 1;
         assert!(msg.is_ok(), "frame {sequence}: status {:#x}", msg.status);
-        assert!(
-            !msg.objects().is_empty(),
-            "frame {sequence}: no objects found without labels"
-        );
-        for gt in truth
-            .objects
-            .iter()
-            .filter(|o| o.visible_fraction >= MIN_VISIBLE_FRACTION)
-        {
+        assert!(!msg.objects().is_empty(), "frame {sequence}: no objects found without labels");
+        for gt in truth.objects.iter().filter(|o| o.visible_fraction >= MIN_VISIBLE_FRACTION) {
             let metric = &metrics[gt.class_id as usize - 1];
             let diameter = objects.objects[gt.class_id as usize - 1].diameter;
             let best = best_add_s(&msg, gt.class_id, &gt.pose, metric);
@@ -102,21 +80,13 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
             }
         }
     }
-    eprintln!(
-        "{found} of {expected} visible objects found with ADD-S < 10% diameter over {frames} frames"
-    );
+    eprintln!("{found} of {expected} visible objects found with ADD-S < 10% diameter over {frames} frames");
     assert!(expected >= 5, "too few visible objects: {expected}");
-    assert!(
-        found as f64 >= MIN_FOUND_SHARE * expected as f64,
-        "only {found} of {expected} objects found"
-    );
+    assert!(found as f64 >= MIN_FOUND_SHARE * expected as f64, "only {found} of {expected} objects found");
 
     let stats = query_stats(&env, Duration::from_secs(5))?;
     let seg = &stats.since_start[Stage::Segmentation as usize];
-    assert_eq!(
-        seg.count, frames,
-        "segmentation time recorded once per frame: {stats:?}"
-    );
+    assert_eq!(seg.count, frames, "segmentation time recorded once per frame: {stats:?}");
     assert!(seg.max_ns > 0, "{seg:?}");
     Ok(())
 }

@@ -31,24 +31,16 @@ pub fn engine_speed(
     let mut est = NetEstimator::from_file(
         file.clone(),
         set,
-        NetOptions {
-            refine_iterations: None,
-            threads,
-            ..NetOptions::default()
-        },
+        NetOptions { refine_iterations: None, threads, ..NetOptions::default() },
     )?;
     let c = file.config.clone();
-    let mut ws = Workspace::new(est.workspace_config(instances.max(1)))
-        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut ws = Workspace::new(est.workspace_config(instances.max(1))).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut rng = rand_pcg::Pcg64::seed_from_u64(3);
     let (n, s) = (c.num_points, c.crop_size);
     ws.crops.mapv_inplace(|_| rng.random_range(-2.0..2.0));
     ws.points.mapv_inplace(|_| rng.random_range(-0.05..0.05));
-    ws.points
-        .slice_mut(ndarray::s![.., .., 2])
-        .mapv_inplace(|v| v + 0.8);
-    ws.choose
-        .mapv_inplace(|_| rng.random_range(0..(s * s) as u32));
+    ws.points.slice_mut(ndarray::s![.., .., 2]).mapv_inplace(|v| v + 0.8);
+    ws.choose.mapv_inplace(|_| rng.random_range(0..(s * s) as u32));
     ws.instances.clear();
     for i in 0..instances {
         ws.instances.push(Instance {

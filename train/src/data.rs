@@ -29,9 +29,7 @@ use self::rand_distr_free::gauss;
 use anyhow::Context;
 use crossbeam::channel::{Receiver, bounded};
 use fusepose_estimator::seg::SegEngine;
-use fusepose_estimator::{
-    ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig,
-};
+use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig};
 use fusepose_scene::bop::BopDataset;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
@@ -90,8 +88,7 @@ pub enum Source {
 impl Source {
     /// Opens `DIR` (a split folder such as `out/train`) and checks its classes against `set`.
     pub fn bop(dir: &std::path::Path, set: &ObjectSet) -> anyhow::Result<Self> {
-        let ds = BopDataset::open(dir)
-            .with_context(|| format!("opening BOP split {}", dir.display()))?;
+        let ds = BopDataset::open(dir).with_context(|| format!("opening BOP split {}", dir.display()))?;
         if ds.is_empty() {
             anyhow::bail!("{} has no frames", dir.display());
         }
@@ -99,12 +96,7 @@ impl Source {
             for c in &m.classes {
                 let ours = set.by_class(c.obj_id).map(|o| o.name.as_str());
                 if ours != Some(c.name.as_str()) {
-                    anyhow::bail!(
-                        "dataset class {} is `{}`, the object set has {:?}",
-                        c.obj_id,
-                        c.name,
-                        ours
-                    );
+                    anyhow::bail!("dataset class {} is `{}`, the object set has {:?}", c.obj_id, c.name, ours);
                 }
             }
         }
@@ -159,16 +151,8 @@ pub fn frame_samples(
         Err(fusepose_scene::sampler::SamplerError::Placement { .. }) => return Ok(Vec::new()),
         Err(e) => return Err(e).context("sampling a scene"),
     };
-    let truth = render_view_labelled(
-        &scene,
-        set,
-        0,
-        &k,
-        &NoiseConfig::default(),
-        LabelKind::Class,
-        target,
-    )
-    .context("rendering a scene")?;
+    let truth = render_view_labelled(&scene, set, 0, &k, &NoiseConfig::default(), LabelKind::Class, target)
+        .context("rendering a scene")?;
     let mut frame = FrameView {
         intrinsics: k,
         color_format: ColorFormat::Rgb8,
@@ -194,15 +178,8 @@ pub fn frame_samples(
             class_id: o.class_id,
             pose: o.pose,
             visible: o.visible_fraction,
-            centre: o.bbox.map(|b| {
-                (
-                    (b.u_min + b.u_max) as f64 / 2.0,
-                    (b.v_min + b.v_max) as f64 / 2.0,
-                )
-            }),
-            max_offset: from_segmenter
-                .then(|| set.by_class(o.class_id).map(|m| m.diameter))
-                .flatten(),
+            centre: o.bbox.map(|b| ((b.u_min + b.u_max) as f64 / 2.0, (b.v_min + b.v_max) as f64 / 2.0)),
+            max_offset: from_segmenter.then(|| set.by_class(o.class_id).map(|m| m.diameter)).flatten(),
         })
         .collect();
     samples_from_frame(&frame, &truths, cfg, seed, ws)
@@ -216,17 +193,12 @@ pub fn bop_frame_samples(
     seed: u64,
     ws: &mut Workspace,
 ) -> anyhow::Result<Vec<Sample>> {
-    let f = ds
-        .load(index)
-        .with_context(|| format!("loading BOP frame {index}"))?;
+    let f = ds.load(index).with_context(|| format!("loading BOP frame {index}"))?;
     let frame = FrameView {
         intrinsics: f.intrinsics,
         color_format: ColorFormat::Rgb8,
         color: &f.rgb,
-        depth: DepthPlane::U16 {
-            data: &f.depth,
-            scale: f.depth_unit_m as f32,
-        },
+        depth: DepthPlane::U16 { data: &f.depth, scale: f.depth_unit_m as f32 },
         labels: Some(LabelPlane::U16(&f.labels)),
     };
     let truths: Vec<Truth> =
@@ -260,36 +232,18 @@ fn samples_from_frame(
     let mut out = Vec::with_capacity(count);
     for i in 0..count {
         let inst = ws.instances[i];
-        let (cu, cv) = (
-            (inst.bbox[0] as f64 + inst.bbox[2] as f64) / 2.0,
-            (inst.bbox[1] as f64 + inst.bbox[3] as f64) / 2.0,
-        );
-        let dist = |t: &Truth| {
-            t.centre
-                .map_or(f64::INFINITY, |(u, v)| (u - cu).powi(2) + (v - cv).powi(2))
-        };
-        let Some(t) = truths
-            .iter()
-            .filter(|t| t.class_id == inst.class_id)
-            .min_by(|a, b| dist(a).total_cmp(&dist(b)))
+        let (cu, cv) =
+            ((inst.bbox[0] as f64 + inst.bbox[2] as f64) / 2.0, (inst.bbox[1] as f64 + inst.bbox[3] as f64) / 2.0);
+        let dist = |t: &Truth| t.centre.map_or(f64::INFINITY, |(u, v)| (u - cu).powi(2) + (v - cv).powi(2));
+        let Some(t) = truths.iter().filter(|t| t.class_id == inst.class_id).min_by(|a, b| dist(a).total_cmp(&dist(b)))
         else {
             continue;
         };
         if t.visible < cfg.min_visible || inst.distinct_points(n) < cfg.min_points {
             continue;
         }
-        let mut crop: Vec<f32> = ws
-            .crops
-            .slice(ndarray::s![i, .., .., ..])
-            .iter()
-            .copied()
-            .collect();
-        let mut points: Vec<f32> = ws
-            .points
-            .slice(ndarray::s![i, .., ..])
-            .iter()
-            .copied()
-            .collect();
+        let mut crop: Vec<f32> = ws.crops.slice(ndarray::s![i, .., .., ..]).iter().copied().collect();
+        let mut points: Vec<f32> = ws.points.slice(ndarray::s![i, .., ..]).iter().copied().collect();
         if let Some(max) = t.max_offset {
             let mut mean = Vector3::<f64>::zeros();
             for p in points.chunks_exact(3) {
@@ -322,13 +276,7 @@ fn samples_from_frame(
             }
             pose = Translation3::from(shift) * pose;
         }
-        out.push(Sample {
-            crop,
-            points,
-            choose,
-            class: inst.class_id as usize - 1,
-            pose,
-        });
+        out.push(Sample { crop, points, choose, class: inst.class_id as usize - 1, pose });
     }
     Ok(out)
 }
@@ -403,11 +351,7 @@ impl Stream {
                 Ok(())
             })
             .expect("spawning the data thread");
-        Self {
-            rx,
-            stop,
-            handle: Some(handle),
-        }
+        Self { rx, stop, handle: Some(handle) }
     }
 
     /// Whether the generator thread has died (its error, if any).

@@ -45,12 +45,7 @@ pub fn quat_to_rot(q: Tensor<2>) -> Tensor<3> {
 
 /// A pose from a raw (unnormalised) `[x, y, z, w]` quaternion and a translation.
 pub fn pose_from_parts(q: [f32; 4], t: [f32; 3]) -> Isometry3<f64> {
-    let q = UnitQuaternion::from_quaternion(Quaternion::new(
-        q[3] as f64,
-        q[0] as f64,
-        q[1] as f64,
-        q[2] as f64,
-    ));
+    let q = UnitQuaternion::from_quaternion(Quaternion::new(q[3] as f64, q[0] as f64, q[1] as f64, q[2] as f64));
     Isometry3::from_parts(Translation3::new(t[0] as f64, t[1] as f64, t[2] as f64), q)
 }
 
@@ -58,10 +53,7 @@ pub fn pose_from_parts(q: [f32; 4], t: [f32; 3]) -> Isometry3<f64> {
 pub fn pose_from_matrix(r: &[f32], t: &[f32]) -> Isometry3<f64> {
     let m = Matrix3::from_row_slice(&r[..9].iter().map(|&v| v as f64).collect::<Vec<_>>());
     let rot = UnitQuaternion::from_matrix(&m);
-    Isometry3::from_parts(
-        Translation3::from(Vector3::new(t[0] as f64, t[1] as f64, t[2] as f64)),
-        rot,
-    )
+    Isometry3::from_parts(Translation3::from(Vector3::new(t[0] as f64, t[1] as f64, t[2] as f64)), rot)
 }
 
 /// Row-major rotation matrix of a pose, as f32.
@@ -80,22 +72,12 @@ mod tests {
     fn tensor_rotation_matches_nalgebra() {
         let q = UnitQuaternion::from_euler_angles(0.3, -1.1, 2.0);
         let c = q.coords; // [x, y, z, w]
-        let raw = [
-            c.x as f32 * 2.0,
-            c.y as f32 * 2.0,
-            c.z as f32 * 2.0,
-            c.w as f32 * 2.0,
-        ];
+        let raw = [c.x as f32 * 2.0, c.y as f32 * 2.0, c.z as f32 * 2.0, c.w as f32 * 2.0];
         let t = Tensor::<2>::from_data(TensorData::new(raw.to_vec(), [1, 4]), &Device::flex());
         let r = quat_to_rot(t).into_data().try_to_vec::<f32>().unwrap();
         let expect = rot_rows(&Isometry3::from_parts(Translation3::identity(), q));
         for i in 0..9 {
-            assert!(
-                (r[i] - expect[i]).abs() < 1e-5,
-                "{i}: {} vs {}",
-                r[i],
-                expect[i]
-            );
+            assert!((r[i] - expect[i]).abs() < 1e-5, "{i}: {} vs {}", r[i], expect[i]);
         }
         let p = pose_from_parts(raw, [0.0; 3]);
         assert!(p.rotation.angle_to(&q) < 1e-6);

@@ -48,13 +48,7 @@ impl GtInstance {
             sigma += v * v.transpose();
             mu += v;
         }
-        Self {
-            pose,
-            model_pts,
-            symmetries: symmetry.sampled(CONTINUOUS_STEPS),
-            sigma: sigma / m,
-            mu: mu / m,
-        }
+        Self { pose, model_pts, symmetries: symmetry.sampled(CONTINUOUS_STEPS), sigma: sigma / m, mu: mu / m }
     }
 
     /// Mean squared distance between the model under (r, t) and under `cand`.
@@ -88,33 +82,17 @@ fn mat_from(rows: &[f32]) -> Matrix3<f64> {
 /// Model points of the batch `[B,M,3]`.
 pub fn model_tensor(gts: &[GtInstance], device: &Device) -> Tensor<3> {
     let m = gts[0].model_pts.len();
-    let flat: Vec<f32> = gts
-        .iter()
-        .flat_map(|g| g.model_pts.iter().flatten().copied())
-        .collect();
+    let flat: Vec<f32> = gts.iter().flat_map(|g| g.model_pts.iter().flatten().copied()).collect();
     Tensor::from_data(TensorData::new(flat, [gts.len(), m, 3]), device)
 }
 
 /// Mean distance `[B,P]` between the model under `P` predicted poses per instance
 /// (`rot [B,P,3,3]`, `trans [B,P,3]`) and under the (symmetry-chosen) targets.
-pub fn add_distance(
-    model: Tensor<3>,
-    rot: Tensor<4>,
-    trans: Tensor<3>,
-    gts: &[GtInstance],
-) -> Tensor<2> {
+pub fn add_distance(model: Tensor<3>, rot: Tensor<4>, trans: Tensor<3>, gts: &[GtInstance]) -> Tensor<2> {
     let [b, p, _, _] = rot.dims();
     let device = rot.device();
-    let rd = rot
-        .clone()
-        .into_data()
-        .try_to_vec::<f32>()
-        .expect("f32 rotations");
-    let td = trans
-        .clone()
-        .into_data()
-        .try_to_vec::<f32>()
-        .expect("f32 translations");
+    let rd = rot.clone().into_data().try_to_vec::<f32>().expect("f32 rotations");
+    let td = trans.clone().into_data().try_to_vec::<f32>().expect("f32 translations");
     let mut tr = Vec::with_capacity(b * p * 9);
     let mut tt = Vec::with_capacity(b * p * 3);
     for (bi, g) in gts.iter().enumerate() {
@@ -131,13 +109,7 @@ pub fn add_distance(
     let ttr = Tensor::<3>::from_data(TensorData::new(tt, [b, p, 3]), &device);
     let pred = transform(model.clone(), rot, trans);
     let target = transform(model, trot, ttr);
-    (pred - target)
-        .powi_scalar(2)
-        .sum_dim(3)
-        .add_scalar(1e-12)
-        .sqrt()
-        .mean_dim(1)
-        .reshape([b, p])
+    (pred - target).powi_scalar(2).sum_dim(3).add_scalar(1e-12).sqrt().mean_dim(1).reshape([b, p])
 }
 
 /// Model points `[B,M,3]` under poses `rot [B,P,3,3]`, `trans [B,P,3]` → `[B,M,P,3]`.
@@ -160,12 +132,7 @@ pub struct PoseLossStats {
 }
 
 /// DenseFusion loss of the pose net output; `w` is the confidence regulariser weight.
-pub fn pose_loss(
-    out: &PoseOut,
-    model: Tensor<3>,
-    gts: &[GtInstance],
-    w: f32,
-) -> (Tensor<1>, PoseLossStats) {
+pub fn pose_loss(out: &PoseOut, model: Tensor<3>, gts: &[GtInstance], w: f32) -> (Tensor<1>, PoseLossStats) {
     let [b, n, _] = out.quat.dims();
     let rot = quat_to_rot(out.quat.clone().reshape([b * n, 4])).reshape([b, n, 3, 3]);
     let dis = add_distance(model, rot, out.trans.clone(), gts); // [B,N]
@@ -177,39 +144,18 @@ pub fn pose_loss(
     let mut best_idx = Vec::with_capacity(b);
     for bi in 0..b {
         let row = &cd[bi * n..bi * n + n];
-        let (i, _) = row
-            .iter()
-            .enumerate()
-            .fold((0, f32::MIN), |a, (i, &c)| if c > a.1 { (i, c) } else { a });
+        let (i, _) = row.iter().enumerate().fold((0, f32::MIN), |a, (i, &c)| if c > a.1 { (i, c) } else { a });
         best += dd[bi * n + i] as f64;
         best_idx.push(i);
     }
     let mean_conf = cd.iter().map(|&c| c as f64).sum::<f64>() / cd.len().max(1) as f64;
-    (
-        loss,
-        PoseLossStats {
-            best: best_idx,
-            best_dis: best / b as f64,
-            mean_conf,
-        },
-    )
+    (loss, PoseLossStats { best: best_idx, best_dis: best / b as f64, mean_conf })
 }
 
 /// Refiner loss: mean distance of the refined poses `rot [B,3,3]`, `trans [B,3]`.
-pub fn refine_loss(
-    rot: Tensor<3>,
-    trans: Tensor<2>,
-    model: Tensor<3>,
-    gts: &[GtInstance],
-) -> Tensor<1> {
+pub fn refine_loss(rot: Tensor<3>, trans: Tensor<2>, model: Tensor<3>, gts: &[GtInstance]) -> Tensor<1> {
     let [b, _, _] = rot.dims();
-    add_distance(
-        model,
-        rot.reshape([b, 1, 3, 3]),
-        trans.reshape([b, 1, 3]),
-        gts,
-    )
-    .mean()
+    add_distance(model, rot.reshape([b, 1, 3, 3]), trans.reshape([b, 1, 3]), gts).mean()
 }
 
 #[cfg(test)]
@@ -221,33 +167,21 @@ mod tests {
         let pts: Vec<[f32; 3]> = (0..50)
             .map(|i| {
                 let a = i as f32 * 0.7;
-                [
-                    0.05 * a.cos(),
-                    0.05 * a.sin(),
-                    0.002 * (i % 10) as f32 - 0.01,
-                ]
+                [0.05 * a.cos(), 0.05 * a.sin(), 0.002 * (i % 10) as f32 - 0.01]
             })
             .collect();
-        let pose = Isometry3::from_parts(
-            Translation3::new(0.1, 0.0, 0.8),
-            UnitQuaternion::from_euler_angles(0.2, 0.1, 0.3),
-        );
+        let pose =
+            Isometry3::from_parts(Translation3::new(0.1, 0.0, 0.8), UnitQuaternion::from_euler_angles(0.2, 0.1, 0.3));
         GtInstance::new(pose, pts, sym)
     }
 
     fn dist_of(g: &GtInstance, p: &Isometry3<f64>) -> f32 {
         let device = Device::flex();
         let model = model_tensor(std::slice::from_ref(g), &device);
-        let r = Tensor::<4>::from_data(
-            TensorData::new(crate::geometry::rot_rows(p).to_vec(), [1, 1, 3, 3]),
-            &device,
-        );
+        let r = Tensor::<4>::from_data(TensorData::new(crate::geometry::rot_rows(p).to_vec(), [1, 1, 3, 3]), &device);
         let t: Vec<f32> = p.translation.vector.iter().map(|&v| v as f32).collect();
         let t = Tensor::<3>::from_data(TensorData::new(t, [1, 1, 3]), &device);
-        add_distance(model, r, t, std::slice::from_ref(g))
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap()[0]
+        add_distance(model, r, t, std::slice::from_ref(g)).into_data().try_to_vec::<f32>().unwrap()[0]
     }
 
     #[test]
@@ -260,18 +194,11 @@ mod tests {
 
     #[test]
     fn symmetric_target_forgives_the_symmetry_rotation() {
-        let sym = Symmetry::Continuous {
-            axis: Vector3::z(),
-            origin: Point3::origin(),
-        };
+        let sym = Symmetry::Continuous { axis: Vector3::z(), origin: Point3::origin() };
         let g = gt(&sym);
         let turned = g.pose * Isometry3::rotation(Vector3::z() * 1.0);
         // 1 rad about the axis: within half a step (2.8°) of a sampled candidate.
-        assert!(
-            dist_of(&g, &turned) < 0.05 * 0.05,
-            "{}",
-            dist_of(&g, &turned)
-        );
+        assert!(dist_of(&g, &turned) < 0.05 * 0.05, "{}", dist_of(&g, &turned));
         let g_none = gt(&Symmetry::None);
         assert!(dist_of(&g_none, &turned) > 0.03);
     }

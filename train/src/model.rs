@@ -61,22 +61,14 @@ impl ColorCnn {
 
     /// `choose`: pixel index `row * S + col` of each point in the crop; `choose_half`:
     /// `(row / 2) * (S / 2) + col / 2` (nearest upsampling of the half-resolution decoder).
-    pub fn forward(
-        &self,
-        crops: Tensor<4>,
-        choose: Tensor<2, Int>,
-        choose_half: Tensor<2, Int>,
-    ) -> Tensor<3> {
+    pub fn forward(&self, crops: Tensor<4>, choose: Tensor<2, Int>, choose_half: Tensor<2, Int>) -> Tensor<3> {
         let [b, _, s, _] = crops.dims();
         let n = choose.dims()[1];
         let e1 = relu(self.e1.forward(crops));
         let e2 = relu(self.e2.forward(e1.clone()));
         let e3 = relu(self.e3.forward(e2.clone()));
         let e4 = relu(self.e4.forward(e3));
-        let up = interpolate(
-            e4,
-            InterpolateOptions::new(InterpolateMode::Nearest).with_output_size([s / 2, s / 2]),
-        );
+        let up = interpolate(e4, InterpolateOptions::new(InterpolateMode::Nearest).with_output_size([s / 2, s / 2]));
         let d1 = relu(self.d1.forward(Tensor::cat(vec![up, e2], 1)));
         let [_, emb, h2, w2] = d1.dims();
         let c1 = e1.dims()[1];
@@ -106,10 +98,7 @@ fn select_class3(x: Tensor<3>, classes: &[usize], w: usize) -> Tensor<3> {
     let [b, n, kw] = x.dims();
     let k = kw / w;
     let device = x.device();
-    let idx: Vec<i64> = classes
-        .iter()
-        .flat_map(|&c| std::iter::repeat_n(c as i64, n * w))
-        .collect();
+    let idx: Vec<i64> = classes.iter().flat_map(|&c| std::iter::repeat_n(c as i64, n * w)).collect();
     let idx = Tensor::<4, Int>::from_data(TensorData::new(idx, [b, n, 1, w]), &device);
     x.reshape([b, n, k, w]).gather(2, idx).reshape([b, n, w])
 }
@@ -142,9 +131,7 @@ impl PoseNet {
             l1: lin(c.geo[1] + c.col[1], c.lift[0], device),
             l2: lin(c.lift[0], c.lift[1], device),
             h1_local: lin(c.local_width(), c.trunk[0], device),
-            h1_global: LinearConfig::new(c.lift[1], c.trunk[0])
-                .with_bias(false)
-                .init(device),
+            h1_global: LinearConfig::new(c.lift[1], c.trunk[0]).with_bias(false).init(device),
             h2: lin(c.trunk[0], c.trunk[1], device),
             rot: lin(c.trunk[1], 4 * k, device),
             tra: lin(c.trunk[1], 3 * k, device),
@@ -153,13 +140,7 @@ impl PoseNet {
     }
 
     /// `points [B,N,3]` camera frame metres, `emb [B,N,emb]`, `classes` 0-based per instance.
-    pub fn forward(
-        &self,
-        c: &NetConfig,
-        points: Tensor<3>,
-        emb: Tensor<3>,
-        classes: &[usize],
-    ) -> PoseOut {
+    pub fn forward(&self, c: &NetConfig, points: Tensor<3>, emb: Tensor<3>, classes: &[usize]) -> PoseOut {
         let [b, n, _] = points.dims();
         let mean = points.clone().mean_dim(1);
         let x = (points.clone() - mean).mul_scalar(c.geo_scale);
@@ -167,10 +148,7 @@ impl PoseNet {
         let g2 = relu(self.g2.forward(g1.clone()));
         let c1 = relu(self.c1.forward(emb));
         let c2 = relu(self.c2.forward(c1.clone()));
-        let l1 = relu(
-            self.l1
-                .forward(Tensor::cat(vec![g2.clone(), c2.clone()], 2)),
-        );
+        let l1 = relu(self.l1.forward(Tensor::cat(vec![g2.clone(), c2.clone()], 2)));
         let l2 = relu(self.l2.forward(l1));
         let global = l2.mean_dim(1); // [B,1,G]
         let local = Tensor::cat(vec![g1, c1, g2, c2], 2);
@@ -178,14 +156,9 @@ impl PoseNet {
         let h1 = relu(self.h1_local.forward(local) + hg);
         let h2 = relu(self.h2.forward(h1));
         let quat = select_class3(self.rot.forward(h2.clone()), classes, 4);
-        let off =
-            select_class3(self.tra.forward(h2.clone()), classes, 3).mul_scalar(c.offset_scale);
+        let off = select_class3(self.tra.forward(h2.clone()), classes, 3).mul_scalar(c.offset_scale);
         let conf = sigmoid(select_class3(self.conf.forward(h2), classes, 1)).reshape([b, n]);
-        PoseOut {
-            quat,
-            trans: points + off,
-            conf,
-        }
+        PoseOut { quat, trans: points + off, conf }
     }
 }
 
@@ -254,14 +227,9 @@ impl Refiner {
         let global = l2.mean_dim(1); // [B,1,R2]
         let m1 = relu(self.m1.forward(global));
         let dq = select_class3(self.rot.forward(m1.clone()), classes, 4).reshape([b, 4]);
-        let identity = Tensor::<2>::from_data(
-            TensorData::new(vec![0.0f32, 0.0, 0.0, 1.0], [1, 4]),
-            &dq.device(),
-        );
+        let identity = Tensor::<2>::from_data(TensorData::new(vec![0.0f32, 0.0, 0.0, 1.0], [1, 4]), &dq.device());
         let dq = dq + identity;
-        let dt = select_class3(self.tra.forward(m1), classes, 3)
-            .reshape([b, 3])
-            .mul_scalar(c.offset_scale);
+        let dt = select_class3(self.tra.forward(m1), classes, 3).reshape([b, 3]).mul_scalar(c.offset_scale);
         let dr = quat_to_rot(dq); // [B,3,3]
         let new_rot = rot.clone().matmul(dr);
         let new_t = trans + rot.matmul(dt.reshape([b, 3, 1])).reshape([b, 3]);
@@ -279,10 +247,6 @@ pub struct FusionNet {
 
 impl FusionNet {
     pub fn new(c: &NetConfig, device: &Device) -> Self {
-        Self {
-            cnn: ColorCnn::new(c, device),
-            pose: PoseNet::new(c, device),
-            refine: Refiner::new(c, device),
-        }
+        Self { cnn: ColorCnn::new(c, device), pose: PoseNet::new(c, device), refine: Refiner::new(c, device) }
     }
 }

@@ -31,8 +31,7 @@ pub fn save(
         .metadata(meta::KEY_CONFIG, serde_json::to_string(config)?)
         .metadata(meta::KEY_OBJECTS, serde_json::to_string(objects)?)
         .metadata(meta::KEY_TRAIN, serde_json::to_string(record)?);
-    net.save_into(&mut store)
-        .map_err(|e| anyhow::anyhow!("saving {}: {e:?}", path.display()))?;
+    net.save_into(&mut store).map_err(|e| anyhow::anyhow!("saving {}: {e:?}", path.display()))?;
     Ok(())
 }
 
@@ -48,16 +47,9 @@ pub fn load(path: &Path, device: &Device) -> anyhow::Result<Loaded> {
     let file = WeightFile::read(path).with_context(|| format!("reading {}", path.display()))?;
     let mut net = FusionNet::new(&file.config, device);
     let mut store = SafetensorsStore::from_file(path);
-    let result = net
-        .load_from(&mut store)
-        .map_err(|e| anyhow::anyhow!("loading {}: {e:?}", path.display()))?;
+    let result = net.load_from(&mut store).map_err(|e| anyhow::anyhow!("loading {}: {e:?}", path.display()))?;
     if !result.missing.is_empty() || !result.errors.is_empty() {
-        bail!(
-            "{}: missing tensors {:?}, errors {:?}",
-            path.display(),
-            result.missing,
-            result.errors
-        );
+        bail!("{}: missing tensors {:?}, errors {:?}", path.display(), result.missing, result.errors);
     }
     Ok(Loaded { net, file })
 }

@@ -25,13 +25,13 @@ use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
 use crate::data::{DataConfig, Sample, SegMasks, Source, Stream};
-use fusepose_estimator::seg::SegEngine;
-use fusepose_estimator::seg::file::{SegFile, embed, has_embedded};
 use crate::geometry::{pose_from_parts, rot_rows};
 use crate::loss::{GtInstance, model_tensor, pose_loss, refine_loss};
 use crate::model::FusionNet;
 use crate::store;
 use crate::validate::{self, Validation};
+use fusepose_estimator::seg::SegEngine;
+use fusepose_estimator::seg::file::{SegFile, embed, has_embedded};
 
 /// Steps of linear learning-rate warm-up at the start of every run.
 pub const WARMUP_STEPS: u64 = 200;
@@ -105,11 +105,7 @@ impl Log {
 
 fn random_rotation(rng: &mut Pcg64, max_angle: f64) -> UnitQuaternion<f64> {
     let axis = loop {
-        let v = Vector3::new(
-            rng.random_range(-1.0..1.0),
-            rng.random_range(-1.0..1.0),
-            rng.random_range(-1.0..1.0),
-        );
+        let v = Vector3::new(rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0));
         let n = v.norm();
         if n > 1e-3 && n <= 1.0 {
             break v / n;
@@ -126,12 +122,9 @@ fn seg_masks(opts: &TrainOptions, set: &ObjectSet) -> anyhow::Result<Option<SegM
     if !matches!(opts.source, Source::Rendered) {
         bail!("segmenter masks are for rendered training frames only");
     }
-    let path = opts
-        .resume
-        .as_ref()
-        .context("segmenter masks need --resume with a file that embeds a segmenter")?;
-    let engine = SegEngine::load(path, set)
-        .with_context(|| format!("loading the segmenter embedded in {}", path.display()))?;
+    let path = opts.resume.as_ref().context("segmenter masks need --resume with a file that embeds a segmenter")?;
+    let engine =
+        SegEngine::load(path, set).with_context(|| format!("loading the segmenter embedded in {}", path.display()))?;
     Ok(Some(SegMasks::new(engine, opts.seg_masks)))
 }
 
@@ -167,25 +160,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             (loaded.net, loaded.file.config.clone(), record)
         }
         None => {
-            let cfg = opts
-                .config
-                .clone()
-                .unwrap_or_else(|| NetConfig::new(set.len()));
+            let cfg = opts.config.clone().unwrap_or_else(|| NetConfig::new(set.len()));
             if cfg.num_classes != set.len() {
-                bail!(
-                    "config has {} classes, the object set {}",
-                    cfg.num_classes,
-                    set.len()
-                );
+                bail!("config has {} classes, the object set {}", cfg.num_classes, set.len());
             }
-            (
-                FusionNet::new(&cfg, &device),
-                cfg,
-                TrainRecord {
-                    seed: opts.seed,
-                    ..TrainRecord::default()
-                },
-            )
+            (FusionNet::new(&cfg, &device), cfg, TrainRecord { seed: opts.seed, ..TrainRecord::default() })
         }
     };
     record.batch = opts.batch;
@@ -224,15 +203,12 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         bail!("give --minutes or --steps");
     }
     let bar = if opts.progress {
-        let len = step_limit
-            .map(|s| s.saturating_sub(start_steps))
-            .unwrap_or_else(|| budget.map_or(0, |d| d.as_secs()));
+        let len =
+            step_limit.map(|s| s.saturating_sub(start_steps)).unwrap_or_else(|| budget.map_or(0, |d| d.as_secs()));
         let b = indicatif::ProgressBar::new(len);
         b.set_style(
-            indicatif::ProgressStyle::with_template(
-                "{elapsed_precise} [{bar:30}] {pos}/{len} ETA {eta} {msg}",
-            )
-            .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
+            indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} ETA {eta} {msg}")
+                .unwrap_or_else(|_| indicatif::ProgressStyle::default_bar()),
         );
         b
     } else {
@@ -255,8 +231,9 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         let frac = match (budget, step_limit) {
             (Some(d), _) if elapsed >= d => break,
             (_, Some(l)) if record.steps >= l => break,
-            (Some(d), Some(l)) => (elapsed.as_secs_f64() / d.as_secs_f64())
-                .max(done as f64 / (l - start_steps).max(1) as f64),
+            (Some(d), Some(l)) => {
+                (elapsed.as_secs_f64() / d.as_secs_f64()).max(done as f64 / (l - start_steps).max(1) as f64)
+            }
             (Some(d), None) => elapsed.as_secs_f64() / d.as_secs_f64(),
             (None, Some(l)) => done as f64 / (l - start_steps).max(1) as f64,
             (None, None) => unreachable!(),
@@ -300,33 +277,16 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             })
             .collect();
         let crops = Tensor::<4>::from_data(
-            TensorData::new(
-                batch
-                    .iter()
-                    .flat_map(|x| x.crop.iter().copied())
-                    .collect::<Vec<_>>(),
-                [b, 3, s, s],
-            ),
+            TensorData::new(batch.iter().flat_map(|x| x.crop.iter().copied()).collect::<Vec<_>>(), [b, 3, s, s]),
             &device,
         );
         let points = Tensor::<3>::from_data(
-            TensorData::new(
-                batch
-                    .iter()
-                    .flat_map(|x| x.points.iter().copied())
-                    .collect::<Vec<_>>(),
-                [b, n, 3],
-            ),
+            TensorData::new(batch.iter().flat_map(|x| x.points.iter().copied()).collect::<Vec<_>>(), [b, n, 3]),
             &device,
         );
-        let choose_v: Vec<i64> = batch
-            .iter()
-            .flat_map(|x| x.choose.iter().map(|&c| c as i64))
-            .collect();
-        let half_v: Vec<i64> = choose_v
-            .iter()
-            .map(|&c| ((c as usize / s / 2) * (s / 2) + (c as usize % s) / 2) as i64)
-            .collect();
+        let choose_v: Vec<i64> = batch.iter().flat_map(|x| x.choose.iter().map(|&c| c as i64)).collect();
+        let half_v: Vec<i64> =
+            choose_v.iter().map(|&c| ((c as usize / s / 2) * (s / 2) + (c as usize % s) / 2) as i64).collect();
         let choose = Tensor::<2, Int>::from_data(TensorData::new(choose_v, [b, n]), &device);
         let half = Tensor::<2, Int>::from_data(TensorData::new(half_v, [b, n]), &device);
         let model = model_tensor(&gts, &device);
@@ -335,24 +295,12 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         let mut total: Option<Tensor<1>> = None;
         let mut pose_best: Option<Vec<Isometry3<f64>>> = None;
         if opts.stage != Stage::Refine {
-            let out = net
-                .pose
-                .forward(&cfg, points.clone(), emb.clone(), &classes);
+            let out = net.pose.forward(&cfg, points.clone(), emb.clone(), &classes);
             let (lp, st) = pose_loss(&out, model.clone(), &gts, w_conf);
             ema_pose = ema(ema_pose, st.best_dis);
             if ema_pose < 0.03 {
-                let q = out
-                    .quat
-                    .clone()
-                    .into_data()
-                    .try_to_vec::<f32>()
-                    .unwrap_or_default();
-                let t = out
-                    .trans
-                    .clone()
-                    .into_data()
-                    .try_to_vec::<f32>()
-                    .unwrap_or_default();
+                let q = out.quat.clone().into_data().try_to_vec::<f32>().unwrap_or_default();
+                let t = out.trans.clone().into_data().try_to_vec::<f32>().unwrap_or_default();
                 pose_best = Some(
                     st.best
                         .iter()
@@ -384,52 +332,30 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
                             rng.random_range(-0.03..0.03),
                             rng.random_range(-0.03..0.03),
                         );
-                        Isometry3::from_parts(
-                            Translation3::from(g.pose.translation.vector + dt),
-                            dr * g.pose.rotation,
-                        )
+                        Isometry3::from_parts(Translation3::from(g.pose.translation.vector + dt), dr * g.pose.rotation)
                     })
                     .collect(),
             };
             let r0 = Tensor::<3>::from_data(
-                TensorData::new(
-                    starts.iter().flat_map(rot_rows).collect::<Vec<_>>(),
-                    [b, 3, 3],
-                ),
+                TensorData::new(starts.iter().flat_map(rot_rows).collect::<Vec<_>>(), [b, 3, 3]),
                 &device,
             );
             let t0 = Tensor::<2>::from_data(
                 TensorData::new(
                     starts
                         .iter()
-                        .flat_map(|p| {
-                            p.translation
-                                .vector
-                                .iter()
-                                .map(|&v| v as f32)
-                                .collect::<Vec<_>>()
-                        })
+                        .flat_map(|p| p.translation.vector.iter().map(|&v| v as f32).collect::<Vec<_>>())
                         .collect::<Vec<_>>(),
                     [b, 3],
                 ),
                 &device,
             );
-            let emb_r = if opts.stage == Stage::Refine {
-                emb.detach()
-            } else {
-                emb
-            };
+            let emb_r = if opts.stage == Stage::Refine { emb.detach() } else { emb };
             let color = net.refine.color(emb_r);
             let (r1, t1) = net.refine.step(&cfg, points, &color, r0, t0, &classes);
             let lr_ = refine_loss(r1, t1, model, &gts);
-            let v = lr_
-                .clone()
-                .into_data()
-                .try_to_vec::<f32>()
-                .unwrap_or_default()
-                .first()
-                .copied()
-                .unwrap_or(f32::NAN) as f64;
+            let v = lr_.clone().into_data().try_to_vec::<f32>().unwrap_or_default().first().copied().unwrap_or(f32::NAN)
+                as f64;
             ema_ref = ema(ema_ref, v);
             total = Some(match total {
                 Some(t) => t + lr_,
@@ -437,14 +363,8 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             });
         }
         let total = total.expect("some stage");
-        let lv = total
-            .clone()
-            .into_data()
-            .try_to_vec::<f32>()
-            .unwrap_or_default()
-            .first()
-            .copied()
-            .unwrap_or(f32::NAN) as f64;
+        let lv = total.clone().into_data().try_to_vec::<f32>().unwrap_or_default().first().copied().unwrap_or(f32::NAN)
+            as f64;
         if !lv.is_finite() {
             bail!("loss is {lv} at step {}", record.steps);
         }
@@ -454,18 +374,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         record.steps += 1;
         record.samples += b as u64;
         let dt = t_step.elapsed().as_secs_f64();
-        step_time = if step_time == 0.0 {
-            dt
-        } else {
-            0.95 * step_time + 0.05 * dt
-        };
+        step_time = if step_time == 0.0 { dt } else { 0.95 * step_time + 0.05 * dt };
         // DenseFusion: once the pose net is accurate, weaken the confidence regulariser.
         if ema_pose < 0.016 && w_conf > 0.01 {
             w_conf = 0.015 * 0.3;
-            log.line(&format!(
-                "# step {}: pose distance {:.4} m < 0.016: w -> {w_conf}",
-                record.steps, ema_pose
-            ));
+            log.line(&format!("# step {}: pose distance {:.4} m < 0.016: w -> {w_conf}", record.steps, ema_pose));
         }
         let msg = format!(
             "loss {:.4} pose {:.1} mm ref {:.1} mm | {:.1} samples/s lr {:.1e}",
@@ -495,11 +408,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             last_ckpt = Instant::now();
             let p = opts.checkpoint_dir.join("checkpoint.safetensors");
             store::save(&net, &cfg, &objects, &record, &p)?;
-            log.line(&format!(
-                "# checkpoint {} at step {}",
-                p.display(),
-                record.steps
-            ));
+            log.line(&format!("# checkpoint {} at step {}", p.display(), record.steps));
         }
     }
     bar.finish_and_clear();
@@ -533,12 +442,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         log.line(&format!("# kept the segmenter embedded in {}", resume.display()));
     }
     log.line(&format!("# wrote {}", opts.out.display()));
-    Ok(TrainSummary {
-        record,
-        validation,
-        out: opts.out.clone(),
-        step_ms: step_time * 1000.0,
-    })
+    Ok(TrainSummary { record, validation, out: opts.out.clone(), step_ms: step_time * 1000.0 })
 }
 
 /// Embeds the segmenter of `resume` (if it has one) into the freshly written
@@ -560,10 +464,7 @@ fn carry_segmenter(resume: &Path, out: &Path) -> anyhow::Result<bool> {
 
 /// Seconds since the Unix epoch (no clock crate needed for a log stamp).
 fn chrono_like_now() -> String {
-    let s = std::time::SystemTime::now()
-        .duration_since(std::time::UNIX_EPOCH)
-        .map(|d| d.as_secs())
-        .unwrap_or(0);
+    let s = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH).map(|d| d.as_secs()).unwrap_or(0);
     format!("unix {s}")
 }
 
@@ -577,13 +478,7 @@ pub fn validate_file(
 ) -> anyhow::Result<Validation> {
     let file = WeightFile::read(path)?;
     file.check_objects(set)?;
-    let val_set = validate::validation_set(
-        set,
-        source,
-        file.config.num_points,
-        file.config.crop_size,
-        frames,
-        max_samples,
-    )?;
+    let val_set =
+        validate::validation_set(set, source, file.config.num_points, file.config.crop_size, frames, max_samples)?;
     validate::validate(&file, set, &val_set, file.config.refine_iters)
 }

@@ -11,17 +11,13 @@ use std::time::Instant;
 
 use fusepose_estimator::net::engine::{quat_matrix, unit_quat};
 use fusepose_estimator::net::{Engine, Scratch, WeightFile};
-use fusepose_scene::metrics::{
-    ADD_S_THRESHOLD_2CM, ObjectMetric, accuracy_below_percent, vocap_auc_percent,
-};
+use fusepose_scene::metrics::{ADD_S_THRESHOLD_2CM, ObjectMetric, accuracy_below_percent, vocap_auc_percent};
 use fusepose_scene::render::RenderTarget;
 use fusepose_scene::{Intrinsics, ObjectSet, Pose};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use ndarray::{Array1, Array2};
 
-use crate::data::{
-    DataConfig, Sample, Source, bop_frame_samples, bop_indices, frame_samples, workspace,
-};
+use crate::data::{DataConfig, Sample, Source, bop_frame_samples, bop_indices, frame_samples, workspace};
 
 /// First scene seed of the validation split (training seeds stay far below).
 pub const VAL_SEED_BASE: u64 = 0x7a11_0000_0000;
@@ -36,23 +32,13 @@ pub fn validation_set(
     frames: usize,
     max_samples: usize,
 ) -> anyhow::Result<Vec<Sample>> {
-    let cfg = DataConfig {
-        num_points,
-        crop_size,
-        min_points: 32,
-        min_visible: 0.2,
-        augment: false,
-    };
+    let cfg = DataConfig { num_points, crop_size, min_points: 32, min_visible: 0.2, augment: false };
     let mut ws = workspace(set, &cfg)?;
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
     let mut out = Vec::new();
     let frames: Vec<u64> = match source {
         Source::Rendered => (0..frames as u64).map(|i| VAL_SEED_BASE + i).collect(),
-        Source::Bop(ds) => bop_indices(ds, true)
-            .into_iter()
-            .take(frames)
-            .map(|i| i as u64)
-            .collect(),
+        Source::Bop(ds) => bop_indices(ds, true).into_iter().take(frames).map(|i| i as u64).collect(),
     };
     for f in frames {
         out.extend(match source {
@@ -102,29 +88,17 @@ pub fn validate(
         engine.set_inputs(&mut sc, s.crop.iter(), pts.view(), ch.view());
         engine.color(&mut sc);
         let best = engine.pose(&mut sc, s.class);
-        let q = [
-            sc.quat[[best, 0]],
-            sc.quat[[best, 1]],
-            sc.quat[[best, 2]],
-            sc.quat[[best, 3]],
-        ];
+        let q = [sc.quat[[best, 0]], sc.quat[[best, 1]], sc.quat[[best, 2]], sc.quat[[best, 3]]];
         let mut rot = quat_matrix(q);
-        let mut t = Vector3::new(
-            sc.trans[[best, 0]],
-            sc.trans[[best, 1]],
-            sc.trans[[best, 2]],
-        );
-        let pose_est: Pose =
-            Isometry3::from_parts(Translation3::from(t.cast::<f64>()), unit_quat(q));
+        let mut t = Vector3::new(sc.trans[[best, 0]], sc.trans[[best, 1]], sc.trans[[best, 2]]);
+        let pose_est: Pose = Isometry3::from_parts(Translation3::from(t.cast::<f64>()), unit_quat(q));
         engine.refine_color(&mut sc);
         for _ in 0..refine_iters {
             (rot, t) = engine.refine(&mut sc, s.class, &rot, &t);
         }
         secs += t0.elapsed().as_secs_f64();
-        let refined: Pose = Isometry3::from_parts(
-            Translation3::from(t.cast::<f64>()),
-            UnitQuaternion::from_matrix(&rot.cast::<f64>()),
-        );
+        let refined: Pose =
+            Isometry3::from_parts(Translation3::from(t.cast::<f64>()), UnitQuaternion::from_matrix(&rot.cast::<f64>()));
         let m = &metrics[s.class];
         let e = m.errors(&pose_est, &s.pose);
         p_adds.push(e.add_s);
@@ -137,17 +111,11 @@ pub fn validate(
     for (stage, adds, add) in [("pose", &p_adds, &p_add), ("refined", &r_adds, &r_add)] {
         out.insert(format!("{stage}.add_s_auc"), vocap_auc_percent(adds));
         out.insert(format!("{stage}.add_or_add_s_auc"), vocap_auc_percent(add));
-        out.insert(
-            format!("{stage}.add_s_lt2cm"),
-            accuracy_below_percent(adds, ADD_S_THRESHOLD_2CM),
-        );
+        out.insert(format!("{stage}.add_s_lt2cm"), accuracy_below_percent(adds, ADD_S_THRESHOLD_2CM));
         let mut sorted = adds.clone();
         sorted.sort_by(f64::total_cmp);
         if !sorted.is_empty() {
-            out.insert(
-                format!("{stage}.add_s_median_mm"),
-                sorted[sorted.len() / 2] * 1000.0,
-            );
+            out.insert(format!("{stage}.add_s_median_mm"), sorted[sorted.len() / 2] * 1000.0);
         }
     }
     Ok(Validation {

@@ -16,27 +16,14 @@ fn bop_frames_become_samples_matched_to_their_ground_truth() {
     let set = builtin_objects();
     let root = std::env::temp_dir().join(format!("fusepose-bop-src-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
-    let mut writer = BopWriter::create(
-        &root,
-        "train",
-        &set,
-        &ObjectSource::Builtin,
-    )
-    .unwrap();
+    let mut writer = BopWriter::create(&root, "train", &set, &ObjectSource::Builtin).unwrap();
     let k = Intrinsics::YCB_VIDEO;
     let mut target = RenderTarget::for_intrinsics(&k);
     for im in 0..11u32 {
         let scene = sample_scene(&set, &SamplerConfig::default(), 40 + im as u64).unwrap();
-        let truth = render_view_labelled(
-            &scene,
-            &set,
-            0,
-            &k,
-            &NoiseConfig::default(),
-            LabelKind::Instance,
-            &mut target,
-        )
-        .unwrap();
+        let truth =
+            render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Instance, &mut target)
+                .unwrap();
         let instances: Vec<InstanceToWrite> = truth
             .objects
             .iter()
@@ -62,20 +49,12 @@ fn bop_frames_become_samples_matched_to_their_ground_truth() {
     }
     drop(writer);
     let split = root.join("train");
-    let Source::Bop(ds) = Source::bop(&split, &set).unwrap() else {
-        panic!("not a BOP source")
-    };
+    let Source::Bop(ds) = Source::bop(&split, &set).unwrap() else { panic!("not a BOP source") };
     assert_eq!(ds.len(), 11);
     assert_eq!(bop_indices(&ds, true), vec![0, 10]);
     assert_eq!(bop_indices(&ds, false).len(), 9);
 
-    let cfg = DataConfig {
-        num_points: 256,
-        crop_size: 64,
-        min_points: 32,
-        min_visible: 0.3,
-        augment: false,
-    };
+    let cfg = DataConfig { num_points: 256, crop_size: 64, min_points: 32, min_visible: 0.3, augment: false };
     let mut ws = workspace(&set, &cfg).unwrap();
     let mut total = 0;
     for i in 0..3 {
@@ -89,16 +68,10 @@ fn bop_frames_become_samples_matched_to_their_ground_truth() {
                 .points
                 .chunks_exact(3)
                 .filter(|p| {
-                    (Point3::new(p[0] as f64, p[1] as f64, p[2] as f64) - c).norm()
-                        > 0.6 * model.diameter + 0.01
+                    (Point3::new(p[0] as f64, p[1] as f64, p[2] as f64) - c).norm() > 0.6 * model.diameter + 0.01
                 })
                 .count();
-            assert!(
-                far * 10 < s.points.len() / 3,
-                "{} of the points are far from {}",
-                far,
-                model.name
-            );
+            assert!(far * 10 < s.points.len() / 3, "{} of the points are far from {}", far, model.name);
         }
     }
     assert!(total >= 5, "only {total} samples from 3 frames");

@@ -69,14 +69,7 @@ fn write_random(set: &ObjectSet, name: &str) -> PathBuf {
     let cfg = NetConfig::new(set.len());
     let net = FusionNet::new(&cfg, &Device::flex());
     let path = temp(name);
-    fusepose_train::store::save(
-        &net,
-        &cfg,
-        &object_entries(set),
-        &TrainRecord::default(),
-        &path,
-    )
-    .unwrap();
+    fusepose_train::store::save(&net, &cfg, &object_entries(set), &TrainRecord::default(), &path).unwrap();
     path
 }
 
@@ -86,24 +79,12 @@ fn estimates_a_rendered_frame_without_allocating_after_warm_up() {
     let path = write_random(&set, "e2e");
     let mut est = NetEstimator::load(&path, &set, NetOptions::default()).unwrap();
     assert_eq!(est.refine_iterations(), 2);
-    let wcfg = WorkspaceConfig {
-        num_classes: set.len() as u16,
-        ..est.workspace_config(8)
-    };
+    let wcfg = WorkspaceConfig { num_classes: set.len() as u16, ..est.workspace_config(8) };
     let mut ws = Workspace::new(wcfg).unwrap();
     let k = Intrinsics::YCB_VIDEO;
     let mut target = RenderTarget::for_intrinsics(&k);
     let scene = sample_scene(&set, &SamplerConfig::default(), 11).unwrap();
-    render_view_labelled(
-        &scene,
-        &set,
-        0,
-        &k,
-        &NoiseConfig::default(),
-        LabelKind::Class,
-        &mut target,
-    )
-    .unwrap();
+    render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Class, &mut target).unwrap();
     let frame = FrameView {
         intrinsics: k,
         color_format: ColorFormat::Rgb8,
@@ -127,10 +108,7 @@ fn estimates_a_rendered_frame_without_allocating_after_warm_up() {
         assert_eq!(allocs, 0, "allocations in a warm estimate");
     }
     // The two-thread split returns exactly the single-thread poses, in instance order.
-    let single = NetOptions {
-        threads: 1,
-        ..NetOptions::default()
-    };
+    let single = NetOptions { threads: 1, ..NetOptions::default() };
     let mut one = NetEstimator::load(&path, &set, single).unwrap();
     assert_eq!(one.threads(), 1);
     let mut out1 = PoseSet::with_capacity(8);
@@ -151,20 +129,12 @@ fn rewrite(
     let (_, header) = SafeTensors::read_metadata(bytes).unwrap();
     let mut md = header.metadata().clone().unwrap_or_default();
     let st = SafeTensors::deserialize(bytes).unwrap();
-    let mut tensors: Vec<(String, Vec<usize>, Vec<u8>)> = st
-        .tensors()
-        .into_iter()
-        .map(|(n, v)| (n, v.shape().to_vec(), v.data().to_vec()))
-        .collect();
+    let mut tensors: Vec<(String, Vec<usize>, Vec<u8>)> =
+        st.tensors().into_iter().map(|(n, v)| (n, v.shape().to_vec(), v.data().to_vec())).collect();
     edit(&mut tensors, &mut md);
     let views: Vec<(String, TensorView<'_>)> = tensors
         .iter()
-        .map(|(n, s, d)| {
-            (
-                n.clone(),
-                TensorView::new(safetensors::Dtype::F32, s.clone(), d).unwrap(),
-            )
-        })
+        .map(|(n, s, d)| (n.clone(), TensorView::new(safetensors::Dtype::F32, s.clone(), d).unwrap()))
         .collect();
     safetensors::serialize(views, Some(md)).unwrap()
 }
@@ -185,16 +155,10 @@ fn malformed_or_mismatched_files_are_refused_with_typed_errors() {
 
     let b = rewrite(&bytes, |t, _| t.retain(|(n, _, _)| n != "pose.l2.weight"));
     let e = WeightFile::from_bytes(&b).unwrap_err();
-    assert!(
-        matches!(&e, NetLoadError::MissingTensor(n) if n == "pose.l2.weight"),
-        "{e}"
-    );
+    assert!(matches!(&e, NetLoadError::MissingTensor(n) if n == "pose.l2.weight"), "{e}");
 
     let b = rewrite(&bytes, |t, _| {
-        let x = t
-            .iter_mut()
-            .find(|(n, _, _)| n == "refine.m1.bias")
-            .unwrap();
+        let x = t.iter_mut().find(|(n, _, _)| n == "refine.m1.bias").unwrap();
         x.1 = vec![x.1[0] / 2, 2];
     });
     let e = WeightFile::from_bytes(&b).unwrap_err();
@@ -204,10 +168,7 @@ fn malformed_or_mismatched_files_are_refused_with_typed_errors() {
         md.remove(meta::KEY_CONFIG);
     });
     let e = WeightFile::from_bytes(&b).unwrap_err();
-    assert!(
-        matches!(e, NetLoadError::MissingMetadata(meta::KEY_CONFIG)),
-        "{e}"
-    );
+    assert!(matches!(e, NetLoadError::MissingMetadata(meta::KEY_CONFIG)), "{e}");
 
     let b = rewrite(&bytes, |_, md| {
         md.insert(meta::KEY_CONFIG.into(), "{\"num_classes\": 3}".into());
@@ -223,33 +184,14 @@ fn malformed_or_mismatched_files_are_refused_with_typed_errors() {
 
     let mut fewer = set.clone();
     fewer.objects.pop();
-    let e = NetEstimator::load(&path, &fewer, NetOptions::default())
-        .err()
-        .unwrap();
+    let e = NetEstimator::load(&path, &fewer, NetOptions::default()).err().unwrap();
     assert!(matches!(e, NetLoadError::ObjectCount { .. }), "{e}");
     let mut renamed = set.clone();
     renamed.objects[1].name.push_str("_v2");
-    let e = NetEstimator::load(&path, &renamed, NetOptions::default())
-        .err()
-        .unwrap();
-    assert!(
-        matches!(
-            e,
-            NetLoadError::ObjectMismatch {
-                class: 2,
-                what: "name",
-                ..
-            }
-        ),
-        "{e}"
-    );
+    let e = NetEstimator::load(&path, &renamed, NetOptions::default()).err().unwrap();
+    assert!(matches!(e, NetLoadError::ObjectMismatch { class: 2, what: "name", .. }), "{e}");
     let mut moved = set.clone();
     moved.objects[0].samples[0].x += 0.001;
-    let e = NetEstimator::load(&path, &moved, NetOptions::default())
-        .err()
-        .unwrap();
-    assert!(
-        matches!(e, NetLoadError::ObjectMismatch { class: 1, .. }),
-        "{e}"
-    );
+    let e = NetEstimator::load(&path, &moved, NetOptions::default()).err().unwrap();
+    assert!(matches!(e, NetLoadError::ObjectMismatch { class: 1, .. }), "{e}");
 }

@@ -15,24 +15,13 @@ use rand::{Rng, SeedableRng};
 fn close(name: &str, engine: &[f32], burn: &[f32]) {
     assert_eq!(engine.len(), burn.len(), "{name}: lengths");
     let scale = burn.iter().fold(0.0f32, |m, v| m.max(v.abs())).max(1e-6);
-    let err = engine
-        .iter()
-        .zip(burn)
-        .fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
-    assert!(
-        err <= 1e-4 * scale,
-        "{name}: max |diff| {err} vs scale {scale}"
-    );
+    let err = engine.iter().zip(burn).fold(0.0f32, |m, (a, b)| m.max((a - b).abs()));
+    assert!(err <= 1e-4 * scale, "{name}: max |diff| {err} vs scale {scale}");
 }
 
 fn entries(k: usize) -> Vec<ObjectEntry> {
     (0..k)
-        .map(|i| ObjectEntry {
-            name: format!("o{i}"),
-            symmetry: "none".into(),
-            diameter: 0.1,
-            hash: "0".into(),
-        })
+        .map(|i| ObjectEntry { name: format!("o{i}"), symmetry: "none".into(), diameter: 0.1, hash: "0".into() })
         .collect()
 }
 
@@ -44,9 +33,7 @@ fn engine_matches_burn_forward_for_pose_net_and_refiner() {
     let (n, s, class) = (cfg.num_points, cfg.crop_size, 2usize);
     let net = FusionNet::new(&cfg, &device);
     let mut rng = rand_pcg::Pcg64::seed_from_u64(7);
-    let crop: Vec<f32> = (0..3 * s * s)
-        .map(|_| rng.random_range(-2.0..2.0))
-        .collect();
+    let crop: Vec<f32> = (0..3 * s * s).map(|_| rng.random_range(-2.0..2.0)).collect();
     let points: Vec<f32> = (0..n)
         .flat_map(|_| {
             [
@@ -56,13 +43,9 @@ fn engine_matches_burn_forward_for_pose_net_and_refiner() {
             ]
         })
         .collect();
-    let choose: Vec<u32> = (0..n)
-        .map(|_| rng.random_range(0..(s * s) as u32))
-        .collect();
-    let half: Vec<i64> = choose
-        .iter()
-        .map(|&p| ((p as usize / s / 2) * (s / 2) + (p as usize % s) / 2) as i64)
-        .collect();
+    let choose: Vec<u32> = (0..n).map(|_| rng.random_range(0..(s * s) as u32)).collect();
+    let half: Vec<i64> =
+        choose.iter().map(|&p| ((p as usize / s / 2) * (s / 2) + (p as usize % s) / 2) as i64).collect();
 
     // burn
     let crop_t = Tensor::<4>::from_data(TensorData::new(crop.clone(), [1, 3, s, s]), &device);
@@ -88,9 +71,7 @@ fn engine_matches_burn_forward_for_pose_net_and_refiner() {
     let color = net.refine.color(emb);
     let mut b_refined = Vec::new();
     for _ in 0..2 {
-        (rot, trans) = net
-            .refine
-            .step(&cfg, pts_t.clone(), &color, rot, trans, &[class]);
+        (rot, trans) = net.refine.step(&cfg, pts_t.clone(), &color, rot, trans, &[class]);
         b_refined.push((
             rot.clone().into_data().try_to_vec::<f32>().unwrap(),
             trans.clone().into_data().try_to_vec::<f32>().unwrap(),

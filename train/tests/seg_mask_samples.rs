@@ -5,9 +5,9 @@
 //! the ground-truth samples untouched.
 
 use fusepose_estimator::seg::SegEngine;
+use fusepose_scene::Intrinsics;
 use fusepose_scene::builtin::builtin_objects;
 use fusepose_scene::render::RenderTarget;
-use fusepose_scene::Intrinsics;
 use fusepose_train::data::{DataConfig, Sample, SegMasks, frame_samples, workspace};
 
 fn centroid(s: &Sample) -> [f32; 3] {
@@ -49,7 +49,9 @@ fn segmenter_masks_give_other_points_of_the_same_objects() {
             differ += (s.points != g.points) as usize;
         }
     }
-    println!("segmenter samples {seg_total}, centroid within 3 cm of the GT-mask sample {matched}, other points {differ}");
+    println!(
+        "segmenter samples {seg_total}, centroid within 3 cm of the GT-mask sample {matched}, other points {differ}"
+    );
     assert!(seg_total >= 15, "only {seg_total} samples from 6 frames with segmenter masks");
     assert!(matched * 10 >= seg_total * 8, "{matched} of {seg_total} segmenter samples view their object");
     assert!(differ * 2 >= seg_total, "segmenter masks should change most samples ({differ} of {seg_total})");

@@ -117,7 +117,13 @@ fn segment_labels_are_argmax_of_burn_logits() {
         (0..w * h).flat_map(|p| [(p % w / 3) as u8, (p / w / 2) as u8, ((p % w + p / w) / 5) as u8]).collect();
     let depth: Vec<f32> = (0..w * h).map(|p| if p % 97 == 0 { 0.0 } else { 0.5 + (p % w) as f32 / 640.0 }).collect();
     let k = Intrinsics::YCB_VIDEO;
-    let frame = FrameView { intrinsics: k, color_format: ColorFormat::Rgb8, color: &color, depth: DepthPlane::F32(&depth), labels: None };
+    let frame = FrameView {
+        intrinsics: k,
+        color_format: ColorFormat::Rgb8,
+        color: &color,
+        depth: DepthPlane::F32(&depth),
+        labels: None,
+    };
     let mut labels = vec![u16::MAX; w * h];
     engine.segment(&frame, &mut labels).unwrap();
     // The engine's input is what the trainer feeds burn; its argmax is the labels.
@@ -158,7 +164,10 @@ fn load_refuses_files_that_do_not_fit() {
     // Different order of the same objects.
     let mut swapped = three_objects();
     swapped.objects.swap(0, 1);
-    assert!(matches!(SegEngine::load(&path, &swapped), Err(NetLoadError::ObjectMismatch { class: 1, what: "name", .. })));
+    assert!(matches!(
+        SegEngine::load(&path, &swapped),
+        Err(NetLoadError::ObjectMismatch { class: 1, what: "name", .. })
+    ));
     // Fewer objects.
     let two = ObjectSet { objects: set.objects[..2].to_vec() };
     assert!(matches!(SegEngine::load(&path, &two), Err(NetLoadError::ObjectCount { file: 3, set: 2 })));
@@ -194,7 +203,10 @@ fn smoke_training() {
         ..SegTrainConfig::default()
     };
     let r = train_segmenter(cfg).unwrap();
-    println!("steps {} frames {} | loss first10 {:.4} last10 {:.4} | {:.0} ms/step", r.record.steps, r.record.samples, r.first_loss, r.last_loss, r.step_ms);
+    println!(
+        "steps {} frames {} | loss first10 {:.4} last10 {:.4} | {:.0} ms/step",
+        r.record.steps, r.record.samples, r.first_loss, r.last_loss, r.step_ms
+    );
     println!("class weights {:?}", r.class_weights);
     println!("curve {:?}", r.loss_curve);
     println!("{}", r.validation.summary());

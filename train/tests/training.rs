@@ -53,27 +53,15 @@ struct Batch {
 fn batch(set: &ObjectSet, cfg: &NetConfig, xs: &[Sample], device: &Device) -> Batch {
     let (b, n, s) = (xs.len(), cfg.num_points, cfg.crop_size);
     let crops = Tensor::<4>::from_data(
-        TensorData::new(
-            xs.iter().flat_map(|x| x.crop.clone()).collect::<Vec<_>>(),
-            [b, 3, s, s],
-        ),
+        TensorData::new(xs.iter().flat_map(|x| x.crop.clone()).collect::<Vec<_>>(), [b, 3, s, s]),
         device,
     );
     let points = Tensor::<3>::from_data(
-        TensorData::new(
-            xs.iter().flat_map(|x| x.points.clone()).collect::<Vec<_>>(),
-            [b, n, 3],
-        ),
+        TensorData::new(xs.iter().flat_map(|x| x.points.clone()).collect::<Vec<_>>(), [b, n, 3]),
         device,
     );
-    let cv: Vec<i64> = xs
-        .iter()
-        .flat_map(|x| x.choose.iter().map(|&c| c as i64))
-        .collect();
-    let hv: Vec<i64> = cv
-        .iter()
-        .map(|&c| ((c as usize / s / 2) * (s / 2) + (c as usize % s) / 2) as i64)
-        .collect();
+    let cv: Vec<i64> = xs.iter().flat_map(|x| x.choose.iter().map(|&c| c as i64)).collect();
+    let hv: Vec<i64> = cv.iter().map(|&c| ((c as usize / s / 2) * (s / 2) + (c as usize % s) / 2) as i64).collect();
     let gts: Vec<GtInstance> = xs
         .iter()
         .map(|x| {
@@ -93,29 +81,19 @@ fn batch(set: &ObjectSet, cfg: &NetConfig, xs: &[Sample], device: &Device) -> Ba
         .map(|x| {
             Isometry3::from_parts(
                 Translation3::from(x.pose.translation.vector + Vector3::new(0.02, 0.0, 0.0)),
-                UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 15f64.to_radians(), 0.0))
-                    * x.pose.rotation,
+                UnitQuaternion::from_scaled_axis(Vector3::new(0.0, 15f64.to_radians(), 0.0)) * x.pose.rotation,
             )
         })
         .collect();
     let r0 = Tensor::<3>::from_data(
-        TensorData::new(
-            starts.iter().flat_map(rot_rows).collect::<Vec<_>>(),
-            [b, 3, 3],
-        ),
+        TensorData::new(starts.iter().flat_map(rot_rows).collect::<Vec<_>>(), [b, 3, 3]),
         device,
     );
     let t0 = Tensor::<2>::from_data(
         TensorData::new(
             starts
                 .iter()
-                .flat_map(|p| {
-                    p.translation
-                        .vector
-                        .iter()
-                        .map(|&v| v as f32)
-                        .collect::<Vec<_>>()
-                })
+                .flat_map(|p| p.translation.vector.iter().map(|&v| v as f32).collect::<Vec<_>>())
                 .collect::<Vec<_>>(),
             [b, 3],
         ),
@@ -152,22 +130,11 @@ fn adam_steps_on_one_batch_lower_pose_and_refiner_losses() {
     let mut last = (0.0, 0.0);
     for _ in 0..25 {
         let model = model_tensor(&bt.gts, &device);
-        let emb = net
-            .cnn
-            .forward(bt.crops.clone(), bt.choose.clone(), bt.half.clone());
-        let out = net
-            .pose
-            .forward(&cfg, bt.points.clone(), emb.clone(), &bt.classes);
+        let emb = net.cnn.forward(bt.crops.clone(), bt.choose.clone(), bt.half.clone());
+        let out = net.pose.forward(&cfg, bt.points.clone(), emb.clone(), &bt.classes);
         let (lp, _) = pose_loss(&out, model.clone(), &bt.gts, 0.015);
         let color = net.refine.color(emb);
-        let (r1, t1) = net.refine.step(
-            &cfg,
-            bt.points.clone(),
-            &color,
-            bt.r0.clone(),
-            bt.t0.clone(),
-            &bt.classes,
-        );
+        let (r1, t1) = net.refine.step(&cfg, bt.points.clone(), &color, bt.r0.clone(), bt.t0.clone(), &bt.classes);
         let lr = refine_loss(r1, t1, model, &bt.gts);
         last = (scalar(lp.clone()), scalar(lr.clone()));
         first.get_or_insert(last);
@@ -175,18 +142,8 @@ fn adam_steps_on_one_batch_lower_pose_and_refiner_losses() {
         net = optim.step(1e-3, net, grads);
     }
     let first = first.unwrap();
-    assert!(
-        last.0 < 0.8 * first.0,
-        "pose loss {} -> {}",
-        first.0,
-        last.0
-    );
-    assert!(
-        last.1 < 0.8 * first.1,
-        "refiner loss {} -> {}",
-        first.1,
-        last.1
-    );
+    assert!(last.0 < 0.8 * first.0, "pose loss {} -> {}", first.0, last.0);
+    assert!(last.1 < 0.8 * first.1, "refiner loss {} -> {}", first.1, last.1);
 }
 
 #[test]
@@ -197,51 +154,16 @@ fn saved_weights_load_back_identically() {
     let net = FusionNet::new(&cfg, &device);
     let dir = std::env::temp_dir().join(format!("fusepose-train-rt-{}", std::process::id()));
     let path = dir.join("w.safetensors");
-    let record = TrainRecord {
-        seed: 9,
-        steps: 123,
-        samples: 984,
-        ..TrainRecord::default()
-    };
+    let record = TrainRecord { seed: 9, steps: 123, samples: 984, ..TrainRecord::default() };
     fusepose_train::store::save(&net, &cfg, &object_entries(&set), &record, &path).unwrap();
     let loaded = fusepose_train::store::load(&path, &device).unwrap();
     assert_eq!(loaded.file.config, cfg);
     assert_eq!(loaded.file.train.as_ref().map(|r| r.steps), Some(123));
-    let a = net
-        .pose
-        .l2
-        .weight
-        .val()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap();
-    let b = loaded
-        .net
-        .pose
-        .l2
-        .weight
-        .val()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap();
+    let a = net.pose.l2.weight.val().into_data().try_to_vec::<f32>().unwrap();
+    let b = loaded.net.pose.l2.weight.val().into_data().try_to_vec::<f32>().unwrap();
     assert_eq!(a, b);
-    let a = net
-        .cnn
-        .d1
-        .weight
-        .val()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap();
-    let b = loaded
-        .net
-        .cnn
-        .d1
-        .weight
-        .val()
-        .into_data()
-        .try_to_vec::<f32>()
-        .unwrap();
+    let a = net.cnn.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
+    let b = loaded.net.cnn.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
     assert_eq!(a, b);
     let _ = std::fs::remove_dir_all(dir);
 }

@@ -138,12 +138,7 @@ pub struct E2eReport {
     pub hlog: Option<PathBuf>,
 }
 
-fn daemon_config(
-    args: &E2eArgs,
-    ns: &IpcNamespace,
-    deadline_ms: f64,
-    hlog: &std::path::Path,
-) -> String {
+fn daemon_config(args: &E2eArgs, ns: &IpcNamespace, deadline_ms: f64, hlog: &std::path::Path) -> String {
     let pins = if args.pin { "[0, 1]" } else { "[]" };
     format!(
         "cameras = [\"{CAMERA}\"]\nlog_level = \"info\"\ndeadline_ms = {deadline_ms}\n\n[estimator]\nkind = \"net\"\nweights = {:?}\nmax_instances = 8\nrefine_iterations = {}\nworker_threads = {}\ndeadline_aware = {}\npin_cpus = {pins}\n{}\n\n[estimator.tracking]\nenabled = {}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 0.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\nreceive_spin_us = {}\n",
@@ -161,11 +156,7 @@ fn daemon_config(
 }
 
 fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
-    let seconds = if args.smoke {
-        args.seconds.min(2.0)
-    } else {
-        args.seconds
-    };
+    let seconds = if args.smoke { args.seconds.min(2.0) } else { args.seconds };
     let warmup = fps.ceil() as u64;
     let frames = warmup + (fps * seconds).round() as u64;
     let deadline_ms = args.deadline_ms.unwrap_or(1000.0 / fps);
@@ -174,23 +165,14 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
     let config_path = ns.dir.join("fuseposed.toml");
     std::fs::write(
         &config_path,
-        daemon_config(
-            args,
-            &ns,
-            deadline_ms,
-            &args.out.join(format!("e2e-{tag}.daemon.hlog")),
-        ),
+        daemon_config(args, &ns, deadline_ms, &args.out.join(format!("e2e-{tag}.daemon.hlog"))),
     )?;
     let log = args.out.join(format!("e2e-{tag}.daemon.log"));
     let env = ns.env();
 
     let daemon = ChildProcess::spawn(
         "daemon",
-        &[
-            "e2e-daemon".into(),
-            config_path.display().to_string(),
-            log.display().to_string(),
-        ],
+        &["e2e-daemon".into(), config_path.display().to_string(), log.display().to_string()],
         &env,
         Duration::from_secs(120),
     )?;
@@ -208,12 +190,7 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
     let file = ns.dir.join("latencies.txt");
     let mut consumer = ChildProcess::spawn(
         "consumer",
-        &[
-            "e2e-consumer".into(),
-            frames.to_string(),
-            warmup.to_string(),
-            file.display().to_string(),
-        ],
+        &["e2e-consumer".into(), frames.to_string(), warmup.to_string(), file.display().to_string()],
         &env,
         Duration::from_secs(30),
     )?;
@@ -231,42 +208,26 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
         &env,
         Duration::from_secs(600),
     )?;
-    eprintln!(
-        "e2e {fps} fps: {frames} frames ({warmup} warm-up), deadline {deadline_ms:.1} ms ..."
-    );
+    eprintln!("e2e {fps} fps: {frames} frames ({warmup} warm-up), deadline {deadline_ms:.1} ms ...");
     let run_time = Duration::from_secs_f64(frames as f64 / fps + 60.0);
     producer.expect_line("done", run_time)?;
     let result = consumer.expect_line("result", Duration::from_secs(30))?;
     let counts: ConsumerCounts = serde_json::from_str(&result)?;
-    let daemon_stale = stats
-        .query(Duration::from_secs(1))
-        .ok()
-        .map(|s| s.frames_skipped_stale);
+    let daemon_stale = stats.query(Duration::from_secs(1)).ok().map(|s| s.frames_skipped_stale);
     daemon.interrupt();
     let _ = daemon.finish(Duration::from_secs(10));
     let _ = producer.finish(Duration::from_secs(5));
     let _ = consumer.finish(Duration::from_secs(5));
     let estimator = std::fs::read_to_string(&log)
         .ok()
-        .and_then(|l| {
-            l.lines()
-                .find(|x| x.contains("fuseposed ready"))
-                .map(|x| x.to_owned())
-        })
-        .and_then(|l| {
-            l.split("estimator=")
-                .nth(1)
-                .map(|s| s.split(" deadline_ms").next().unwrap_or(s).to_owned())
-        })
+        .and_then(|l| l.lines().find(|x| x.contains("fuseposed ready")).map(|x| x.to_owned()))
+        .and_then(|l| l.split("estimator=").nth(1).map(|s| s.split(" deadline_ms").next().unwrap_or(s).to_owned()))
         .unwrap_or_default();
 
     let mut histogram = latency::histogram();
     let deadline_ns = (deadline_ms * 1e6) as u64;
     let mut late = 0;
-    for v in std::fs::read_to_string(&file)?
-        .lines()
-        .filter_map(|l| l.parse::<u64>().ok())
-    {
+    for v in std::fs::read_to_string(&file)?.lines().filter_map(|l| l.parse::<u64>().ok()) {
         histogram.saturating_record(v.max(1));
         late += (v > deadline_ns) as u64;
     }
@@ -285,30 +246,16 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
 
 /// Runs every frame rate in turn; progress on stderr.
 pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
-    anyhow::ensure!(
-        args.weights.exists(),
-        "{} does not exist (the network weights)",
-        args.weights.display()
-    );
-    anyhow::ensure!(
-        args.fps.iter().all(|f| f.is_finite() && *f > 0.0),
-        "--fps must be positive"
-    );
+    anyhow::ensure!(args.weights.exists(), "{} does not exist (the network weights)", args.weights.display());
+    anyhow::ensure!(args.fps.iter().all(|f| f.is_finite() && *f > 0.0), "--fps must be positive");
     std::fs::create_dir_all(&args.out)?;
     let load_before = loadavg::loadavg();
     let mut rates = Vec::new();
     for &fps in &args.fps {
         rates.push(run_rate(args, fps)?);
     }
-    let series: Vec<(String, Percentiles)> = rates
-        .iter()
-        .map(|r| {
-            (
-                format!("{} FPS, {} objects", r.fps, args.objects),
-                r.latency,
-            )
-        })
-        .collect();
+    let series: Vec<(String, Percentiles)> =
+        rates.iter().map(|r| (format!("{} FPS, {} objects", r.fps, args.objects), r.latency)).collect();
     let png = args.out.join("e2e.png");
     let png = latency::plot_percentiles(
         &png,
@@ -320,27 +267,13 @@ pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
     .ok()
     .map(|_| png);
     let hlog = args.out.join("e2e.hlog");
-    let tagged: Vec<(String, &Histogram<u64>)> = rates
-        .iter()
-        .map(|r| (format!("e2e.{}fps", r.fps), &r.histogram))
-        .collect();
+    let tagged: Vec<(String, &Histogram<u64>)> =
+        rates.iter().map(|r| (format!("e2e.{}fps", r.fps), &r.histogram)).collect();
     let duration_ns = (args.seconds * 1e9) as u64;
-    let hlog = latency::write_hlog(
-        &hlog,
-        "fusepose-bench e2e: capture -> consumer latency, ns",
-        &tagged,
-        duration_ns,
-    )
-    .ok()
-    .map(|_| hlog);
-    Ok(E2eReport {
-        args: args.clone(),
-        rates,
-        load_before,
-        load_after: loadavg::loadavg(),
-        png,
-        hlog,
-    })
+    let hlog = latency::write_hlog(&hlog, "fusepose-bench e2e: capture -> consumer latency, ns", &tagged, duration_ns)
+        .ok()
+        .map(|_| hlog);
+    Ok(E2eReport { args: args.clone(), rates, load_before, load_after: loadavg::loadavg(), png, hlog })
 }
 
 /// The printed table.
@@ -350,19 +283,10 @@ pub fn render(r: &E2eReport) -> String {
         "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + producer ({} objects, rendered video) + consumer\n",
         a.threads, a.refine_iterations, !a.no_degrade, a.tracking, a.pin, a.objects
     );
-    if let Some(e) = r
-        .rates
-        .first()
-        .map(|r| &r.estimator)
-        .filter(|e| !e.is_empty())
-    {
+    if let Some(e) = r.rates.first().map(|r| &r.estimator).filter(|e| !e.is_empty()) {
         s.push_str(&format!("estimator: {e}\n"));
     }
-    s.push_str(&format!(
-        "loadavg before: {}   cpus: {}\n\n",
-        r.load_before,
-        loadavg::cpus()
-    ));
+    s.push_str(&format!("loadavg before: {}   cpus: {}\n\n", r.load_before, loadavg::cpus()));
     s.push_str(&format!(
         "{:>6} {:>9} {:>8} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}\n",
         "fps",
@@ -382,11 +306,8 @@ pub fn render(r: &E2eReport) -> String {
     ));
     for x in &r.rates {
         let [p50, p99, p999, max] = x.latency.scaled(1e6);
-        let iters = if x.counts.objects > 0 {
-            x.counts.refine_iterations as f64 / x.counts.objects as f64
-        } else {
-            f64::NAN
-        };
+        let iters =
+            if x.counts.objects > 0 { x.counts.refine_iterations as f64 / x.counts.objects as f64 } else { f64::NAN };
         s.push_str(&format!(
             "{:>6.1} {:>9.2} {:>8.1} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>7.2}\n",
             x.fps,
@@ -408,11 +329,7 @@ pub fn render(r: &E2eReport) -> String {
     s.push_str("\nachieved = posed messages per second at the consumer; skipped = sent but never posed (the daemon keeps only the newest frame);\n");
     s.push_str("missed = DEADLINE_MISSED flags (capture -> publish > deadline); late@cons = capture -> consumer > deadline; iters = mean refiner iterations per object.\n");
     for x in &r.rates {
-        let objects = if x.counts.messages > 0 {
-            x.counts.objects as f64 / x.counts.messages as f64
-        } else {
-            0.0
-        };
+        let objects = if x.counts.messages > 0 { x.counts.objects as f64 / x.counts.messages as f64 } else { 0.0 };
         s.push_str(&format!(
             "{} fps: {:.2} objects per message, invalid {}, estimator failed {}, daemon stale drops {}\n",
             x.fps,

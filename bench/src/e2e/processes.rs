@@ -14,8 +14,7 @@ use std::io::Write;
 use std::time::{Duration, Instant};
 
 use fusepose_client::{
-    Consumer, DepthMut, FrameLayout, Ipc, IpcOptions, LabelFormat, LabelsMut, PoseStatus, Producer,
-    monotonic_ns,
+    Consumer, DepthMut, FrameLayout, Ipc, IpcOptions, LabelFormat, LabelsMut, PoseStatus, Producer, monotonic_ns,
 };
 
 use crate::video::{self, DEPTH_SCALE_M};
@@ -28,11 +27,7 @@ pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
     let config = fusepose_daemon::DaemonConfig::load(std::path::Path::new(&args[0]))?;
     let log = std::fs::File::create(&args[1])?;
     let filter = tracing_subscriber::EnvFilter::try_new(&config.log_level)?;
-    tracing_subscriber::fmt()
-        .with_env_filter(filter)
-        .with_ansi(false)
-        .with_writer(std::sync::Mutex::new(log))
-        .init();
+    tracing_subscriber::fmt().with_env_filter(filter).with_ansi(false).with_writer(std::sync::Mutex::new(log)).init();
     iceoryx2::prelude::set_log_level(iceoryx2::prelude::LogLevel::Warn);
     let spec = fusepose_daemon::engine::resolve(&config.estimator)?;
     println!("ready {}", spec.description);
@@ -42,10 +37,7 @@ pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
 }
 
 pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        args.len() == 5,
-        "usage: e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES"
-    );
+    anyhow::ensure!(args.len() == 5, "usage: e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES");
     let fps: f64 = args[0].parse()?;
     let frames: u64 = args[1].parse()?;
     let objects: usize = args[2].parse()?;
@@ -81,9 +73,7 @@ pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
             l.copy_from_slice(&source.labels);
         }
         frame.send()?;
-        if let Some(wait) =
-            (t0 + period.mul_f64(i as f64 + 1.0)).checked_duration_since(Instant::now())
-        {
+        if let Some(wait) = (t0 + period.mul_f64(i as f64 + 1.0)).checked_duration_since(Instant::now()) {
             std::thread::sleep(wait);
         }
     }
@@ -125,9 +115,7 @@ pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
     let mut idle_since = Instant::now();
     loop {
         let idle = idle_since.elapsed();
-        if (first.is_some() && idle > Duration::from_secs(3))
-            || started.elapsed() > Duration::from_secs(3600)
-        {
+        if (first.is_some() && idle > Duration::from_secs(3)) || started.elapsed() > Duration::from_secs(3600) {
             break;
         }
         if first.is_none() && idle > Duration::from_secs(120) {
@@ -156,11 +144,7 @@ pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
             counts.invalid += (msg.status & PoseStatus::INVALID_FRAME != 0) as u64;
             counts.estimator_failed += (msg.status & PoseStatus::ESTIMATOR_FAILED != 0) as u64;
             counts.objects += msg.objects().len() as u64;
-            counts.refine_iterations += msg
-                .objects()
-                .iter()
-                .map(|o| o.refine_iterations as u64)
-                .sum::<u64>();
+            counts.refine_iterations += msg.objects().iter().map(|o| o.refine_iterations as u64).sum::<u64>();
         }
         if done {
             break;

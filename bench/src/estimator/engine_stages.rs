@@ -53,7 +53,13 @@ pub fn colour_flops(c: &NetConfig, n: usize, s: usize) -> f64 {
 
 /// Runs every instance of `frames` (prepared into `ws`) through the stages
 /// `rounds` times; `iters` refiner iterations.
-pub fn time_stages(engine: &Engine, ws: &mut Workspace, frames: &[&TestFrame], iters: usize, rounds: usize) -> Vec<EngineStage> {
+pub fn time_stages(
+    engine: &Engine,
+    ws: &mut Workspace,
+    frames: &[&TestFrame],
+    iters: usize,
+    rounds: usize,
+) -> Vec<EngineStage> {
     let c = &engine.config;
     let (n, s) = (ws.config.num_points, ws.config.crop_size);
     let mut sc = Scratch::new(c, n, s);

@@ -14,8 +14,8 @@ use fusepose_estimator::net::NetEstimator;
 use fusepose_estimator::{Estimator, IcpEstimator, PoseSet, Workspace};
 
 use super::frames::TestFrame;
-use crate::{alloc_count, cpu_time};
 use crate::summary::Summary;
+use crate::{alloc_count, cpu_time};
 
 /// The network and its workspace.
 pub struct NetPipe {

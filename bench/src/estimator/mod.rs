@@ -116,7 +116,9 @@ pub struct Report {
 /// Loads the network as asked, or says why not.
 fn load_net(args: &EstimatorArgs, set: &fusepose_scene::ObjectSet, notes: &mut Vec<String>) -> Option<NetEstimator> {
     let file = if args.random_weights {
-        notes.push("net: randomly initialised weights of the default architecture (--random-weights); timings only".into());
+        notes.push(
+            "net: randomly initialised weights of the default architecture (--random-weights); timings only".into(),
+        );
         match random_weights::random_weights(set, 7) {
             Ok(f) => f,
             Err(e) => {
@@ -155,7 +157,8 @@ pub fn run(args: &EstimatorArgs) -> anyhow::Result<Report> {
     let load_before = loadavg::loadavg();
     let alloc_counting = alloc_count::installed();
     let set = builtin_objects();
-    let (frames_to_time, scenes) = if args.smoke { (args.frames.min(3), 1) } else { (args.frames.max(1), args.scenes.max(1)) };
+    let (frames_to_time, scenes) =
+        if args.smoke { (args.frames.min(3), 1) } else { (args.frames.max(1), args.scenes.max(1)) };
     let mut ks = args.objects_per_frame.clone();
     ks.retain(|&k| k >= 1);
     anyhow::ensure!(!ks.is_empty(), "--objects-per-frame needs at least one K >= 1");
@@ -176,8 +179,12 @@ pub fn run(args: &EstimatorArgs) -> anyhow::Result<Report> {
     let mut icp = match args.estimator {
         Which::Icp | Which::Both => {
             let est = IcpEstimator::new(&set, IcpConfig::default()).map_err(|e| anyhow::anyhow!("{e}"))?;
-            let ws = Workspace::new(WorkspaceConfig { max_instances, num_classes: set.len() as u16, ..WorkspaceConfig::default() })
-                .map_err(|e| anyhow::anyhow!("{e}"))?;
+            let ws = Workspace::new(WorkspaceConfig {
+                max_instances,
+                num_classes: set.len() as u16,
+                ..WorkspaceConfig::default()
+            })
+            .map_err(|e| anyhow::anyhow!("{e}"))?;
             Some(IcpPipe { est, ws })
         }
         Which::Net => None,
@@ -209,7 +216,8 @@ pub fn run(args: &EstimatorArgs) -> anyhow::Result<Report> {
     let engine = match net.as_mut() {
         Some(p) => {
             eprintln!("network stages on one thread ...");
-            let largest: Vec<&frames::TestFrame> = all_frames.last().map(|(_, f)| f.iter().collect()).unwrap_or_default();
+            let largest: Vec<&frames::TestFrame> =
+                all_frames.last().map(|(_, f)| f.iter().collect()).unwrap_or_default();
             engine_stages::time_stages(p.est.engine(), &mut p.ws, &largest, p.iters, if args.smoke { 1 } else { 3 })
         }
         None => Vec::new(),

@@ -50,9 +50,7 @@ pub fn plot_stages(rows: &[StageRow], path: &Path) -> anyhow::Result<()> {
             .map_err(|e| err(&e))?
             .label(*stage)
             .legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], colour.stroke_width(2)));
-        chart
-            .draw_series(median.iter().map(|&p| Circle::new(p, 3, colour.filled())))
-            .map_err(|e| err(&e))?;
+        chart.draw_series(median.iter().map(|&p| Circle::new(p, 3, colour.filled()))).map_err(|e| err(&e))?;
         chart.draw_series(LineSeries::new(p90, colour.mix(0.5).stroke_width(1))).map_err(|e| err(&e))?;
     }
     chart

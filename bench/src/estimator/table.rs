@@ -18,7 +18,21 @@ pub fn render(r: &Report) -> String {
     let _ = writeln!(
         s,
         "{:<22} {:>2} {:>4} | {:>9} {:>8} {:>8} | {:>9} {:>8} {:>8} | {:>8} | {:>6} | {:>7} {:>5} | {:>7} {:>5}",
-        "stage", "K", "inst", "frame ms", "p90", "p99", "object ms", "p90", "p99", "cpu ms", "allocs", "GFLOP/s", "%peak", "cpu GF/s", "%peak"
+        "stage",
+        "K",
+        "inst",
+        "frame ms",
+        "p90",
+        "p99",
+        "object ms",
+        "p90",
+        "p99",
+        "cpu ms",
+        "allocs",
+        "GFLOP/s",
+        "%peak",
+        "cpu GF/s",
+        "%peak"
     );
     let _ = writeln!(s, "{}", "-".repeat(146));
     let mut last_k = None;

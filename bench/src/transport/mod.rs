@@ -53,14 +53,7 @@ pub struct TransportArgs {
 
 impl Default for TransportArgs {
     fn default() -> Self {
-        Self {
-            frames: 1200,
-            fps: 60.0,
-            warmup: 30,
-            smoke: false,
-            pin: false,
-            out: "scratch/bench/transport".into(),
-        }
+        Self { frames: 1200, fps: 60.0, warmup: 30, smoke: false, pin: false, out: "scratch/bench/transport".into() }
     }
 }
 
@@ -114,22 +107,13 @@ impl TransportReport {
 
 /// Iceoryx2 receive strategies measured, with their table names.
 pub const IOX_MODES: [(&str, &str, WaitStrategy); 3] = [
-    (
-        "iox-spin",
-        "iceoryx2, spin-then-wait",
-        WaitStrategy::DEFAULT_SPIN,
-    ),
+    ("iox-spin", "iceoryx2, spin-then-wait", WaitStrategy::DEFAULT_SPIN),
     ("iox-block", "iceoryx2, block on event", WaitStrategy::Block),
-    (
-        "iox-busy",
-        "iceoryx2, busy poll (payload path only)",
-        WaitStrategy::BusyPoll,
-    ),
+    ("iox-busy", "iceoryx2, busy poll (payload path only)", WaitStrategy::BusyPoll),
 ];
 
 fn pace(t0: Instant, i: u64, period: Duration) {
-    if let Some(wait) = (t0 + period.mul_f64(i as f64 + 1.0)).checked_duration_since(Instant::now())
-    {
+    if let Some(wait) = (t0 + period.mul_f64(i as f64 + 1.0)).checked_duration_since(Instant::now()) {
         std::thread::sleep(wait);
     }
 }
@@ -145,11 +129,7 @@ fn collect(
     let mut child = child;
     let line = child.expect_line("result", Duration::from_secs(30))?;
     child.finish(Duration::from_secs(10))?;
-    let cpu_percent: f64 = line
-        .split_whitespace()
-        .next()
-        .and_then(|s| s.parse().ok())
-        .unwrap_or(f64::NAN);
+    let cpu_percent: f64 = line.split_whitespace().next().and_then(|s| s.parse().ok()).unwrap_or(f64::NAN);
     let field = |key: &str| -> Option<f64> {
         let mut it = line.split_whitespace();
         it.find(|w| *w == key)?;
@@ -158,10 +138,7 @@ fn collect(
     let (polled_percent, jitter_us, wake_delay_us) =
         (field("polled_percent"), field("jitter_us"), field("wake_delay_us"));
     let mut histogram = latency::histogram();
-    for value in std::fs::read_to_string(file)?
-        .lines()
-        .filter_map(|l| l.parse::<u64>().ok())
-    {
+    for value in std::fs::read_to_string(file)?.lines().filter_map(|l| l.parse::<u64>().ok()) {
         histogram.saturating_record(value.max(1));
     }
     let _ = std::fs::remove_file(file);
@@ -200,12 +177,8 @@ fn run_iceoryx(
         &file.display().to_string(),
     ]
     .map(String::from);
-    let child = ChildProcess::spawn(
-        "iceoryx2 receiver",
-        &child_args,
-        &receiver_env(args, ns.env()),
-        Duration::from_secs(20),
-    )?;
+    let child =
+        ChildProcess::spawn("iceoryx2 receiver", &child_args, &receiver_env(args, ns.env()), Duration::from_secs(20))?;
     std::thread::sleep(Duration::from_millis(200));
     let period = Duration::from_secs_f64(1.0 / args.fps);
     let mut send_call = latency::histogram();
@@ -228,14 +201,7 @@ fn run_iceoryx(
             send_call.saturating_record((monotonic_ns() - start).max(1));
         }
     }
-    collect(
-        name,
-        tag,
-        child,
-        &file,
-        frames.saturating_sub(args.warmup),
-        &send_call,
-    )
+    collect(name, tag, child, &file, frames.saturating_sub(args.warmup), &send_call)
 }
 
 fn run_socket(args: &TransportArgs, frames: u64) -> anyhow::Result<ModeResult> {
@@ -252,12 +218,8 @@ fn run_socket(args: &TransportArgs, frames: u64) -> anyhow::Result<ModeResult> {
         &file.display().to_string(),
     ]
     .map(String::from);
-    let child = ChildProcess::spawn(
-        "socket receiver",
-        &child_args,
-        &receiver_env(args, Vec::new()),
-        Duration::from_secs(20),
-    )?;
+    let child =
+        ChildProcess::spawn("socket receiver", &child_args, &receiver_env(args, Vec::new()), Duration::from_secs(20))?;
     let (mut stream, _) = listener.accept()?;
     let frame_len = FrameLayout::vga_rgbd().payload_len();
     let mut buf = vec![0u8; 8 + frame_len];
@@ -275,14 +237,7 @@ fn run_socket(args: &TransportArgs, frames: u64) -> anyhow::Result<ModeResult> {
             send_call.saturating_record((monotonic_ns() - now).max(1));
         }
     }
-    collect(
-        "Unix socket, copy",
-        "uds",
-        child,
-        &file,
-        frames.saturating_sub(args.warmup),
-        &send_call,
-    )
+    collect("Unix socket, copy", "uds", child, &file, frames.saturating_sub(args.warmup), &send_call)
 }
 
 /// Runs every transport in turn; progress on stderr.
@@ -302,11 +257,7 @@ pub fn run(args: &TransportArgs) -> anyhow::Result<TransportReport> {
         fusepose_estimator::cpu_pin::pin_current_thread(0)
             .map_err(|e| anyhow::anyhow!("pinning the sender to CPU 0: {e}"))?;
     }
-    let frames = if args.smoke {
-        60.min(args.frames).max(args.warmup + 10)
-    } else {
-        args.frames.max(args.warmup + 1)
-    };
+    let frames = if args.smoke { 60.min(args.frames).max(args.warmup + 10) } else { args.frames.max(args.warmup + 1) };
     let mut modes = Vec::new();
     for (tag, name, _) in IOX_MODES {
         eprintln!("transport: {name}, {frames} frames at {} fps ...", args.fps);
@@ -316,32 +267,17 @@ pub fn run(args: &TransportArgs) -> anyhow::Result<TransportReport> {
     modes.push(run_socket(args, frames)?);
 
     std::fs::create_dir_all(&args.out)?;
-    let series: Vec<(String, Percentiles)> =
-        modes.iter().map(|m| (m.name.clone(), m.latency)).collect();
+    let series: Vec<(String, Percentiles)> = modes.iter().map(|m| (m.name.clone(), m.latency)).collect();
     let png = args.out.join("transport.png");
-    let png = latency::plot_percentiles(
-        &png,
-        "640x480 RGB-D frame, one-way latency",
-        "µs",
-        1e3,
-        &series,
-    )
-    .ok()
-    .map(|_| png);
+    let png =
+        latency::plot_percentiles(&png, "640x480 RGB-D frame, one-way latency", "µs", 1e3, &series).ok().map(|_| png);
     let hlog = args.out.join("transport.hlog");
-    let tagged: Vec<(String, &Histogram<u64>)> = modes
-        .iter()
-        .map(|m| (format!("transport.{}", m.tag), &m.histogram))
-        .collect();
+    let tagged: Vec<(String, &Histogram<u64>)> =
+        modes.iter().map(|m| (format!("transport.{}", m.tag), &m.histogram)).collect();
     let duration_ns = (frames as f64 / args.fps * 1e9) as u64;
-    let hlog = latency::write_hlog(
-        &hlog,
-        "fusepose-bench transport: one-way frame latency, ns",
-        &tagged,
-        duration_ns,
-    )
-    .ok()
-    .map(|_| hlog);
+    let hlog = latency::write_hlog(&hlog, "fusepose-bench transport: one-way frame latency, ns", &tagged, duration_ns)
+        .ok()
+        .map(|_| hlog);
     Ok(TransportReport {
         frame_bytes: FrameLayout::vga_rgbd().payload_len(),
         frames,
@@ -367,23 +303,10 @@ pub fn render(r: &TransportReport) -> String {
         r.warmup,
         if r.pinned { "; sender pinned to CPU 0, receivers to CPU 1" } else { "; unpinned" }
     ));
-    s.push_str(&format!(
-        "loadavg before: {}   cpus: {}\n\n",
-        r.load_before,
-        loadavg::cpus()
-    ));
+    s.push_str(&format!("loadavg before: {}   cpus: {}\n\n", r.load_before, loadavg::cpus()));
     s.push_str(&format!(
         "{:<44} {:>6} {:>10} {:>10} {:>10} {:>10} {:>6} {:>12} {:>13} {:>9}\n",
-        "transport",
-        "n",
-        "p50 µs",
-        "p99 µs",
-        "p99.9 µs",
-        "max µs",
-        "lost",
-        "recv CPU %",
-        "send p50 µs",
-        "polled %"
+        "transport", "n", "p50 µs", "p99 µs", "p99.9 µs", "max µs", "lost", "recv CPU %", "send p50 µs", "polled %"
     ));
     for m in &r.modes {
         let [p50, p99, p999, max] = m.latency.scaled(1e3);
@@ -422,7 +345,9 @@ pub fn render(r: &TransportReport) -> String {
         ));
     }
     s.push_str("polled % = frames the receiver found while polling (the rest woke it through the event).\n");
-    s.push_str("send p50 = the sender's send call (iceoryx2: send + event notify; socket: write_all), part of the latency.\n");
+    s.push_str(
+        "send p50 = the sender's send call (iceoryx2: send + event notify; socket: write_all), part of the latency.\n",
+    );
     if let Some(p) = &r.png {
         s.push_str(&format!("png: {}\n", p.display()));
     }

@@ -7,8 +7,7 @@ use std::os::unix::net::UnixStream;
 use std::time::{Duration, Instant};
 
 use fusepose_client::{
-    ArrivalPredictor, CameraServices, Ipc, IpcOptions, WaitStrategy, decode_frame, monotonic_ns,
-    wait_for_samples,
+    ArrivalPredictor, CameraServices, Ipc, IpcOptions, WaitStrategy, decode_frame, monotonic_ns, wait_for_samples,
 };
 
 /// Process CPU time (user + system), ms.
@@ -31,10 +30,7 @@ fn strategy(tag: &str) -> anyhow::Result<WaitStrategy> {
 
 /// Entry point of the hidden subcommand; `args` follow `transport-receiver`.
 pub fn main(args: &[String]) -> anyhow::Result<()> {
-    anyhow::ensure!(
-        args.len() == 5,
-        "usage: transport-receiver iox|uds STRATEGY|SOCKET FRAMES WARMUP FILE"
-    );
+    anyhow::ensure!(args.len() == 5, "usage: transport-receiver iox|uds STRATEGY|SOCKET FRAMES WARMUP FILE");
     if let Ok(cpu) = std::env::var(super::PIN_ENV) {
         let cpu: usize = cpu.parse()?;
         fusepose_estimator::cpu_pin::pin_current_thread(cpu)
@@ -51,16 +47,8 @@ pub fn main(args: &[String]) -> anyhow::Result<()> {
             let strategy = strategy(&args[1])?;
             let ipc = Ipc::new(&IpcOptions::from_env())?;
             let services = CameraServices::open(&ipc, "bench")?;
-            let subscriber = services
-                .frames
-                .subscriber_builder()
-                .create()
-                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
-            let listener = services
-                .frame_events
-                .listener_builder()
-                .create()
-                .map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            let subscriber = services.frames.subscriber_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            let listener = services.frame_events.listener_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
             println!("ready");
             std::io::stdout().flush()?;
             let mut predictor = ArrivalPredictor::default();
@@ -79,9 +67,7 @@ pub fn main(args: &[String]) -> anyhow::Result<()> {
                 if !ready {
                     break;
                 }
-                while let Some(sample) =
-                    subscriber.receive().map_err(|e| anyhow::anyhow!("{e:?}"))?
-                {
+                while let Some(sample) = subscriber.receive().map_err(|e| anyhow::anyhow!("{e:?}"))? {
                     let planes = decode_frame(sample.user_header(), sample.payload(), None)?;
                     // Touch the frame so it is really readable here.
                     checksum = checksum.wrapping_add(planes.color[planes.color.len() / 2] as u64);

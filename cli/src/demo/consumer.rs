@@ -9,9 +9,7 @@ use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use fusepose_client::{
-    Consumer, Ipc, IpcOptions, PoseMessage, PoseStatus, StatsClient, TIMELINE_COUNT,
-};
+use fusepose_client::{Consumer, Ipc, IpcOptions, PoseMessage, PoseStatus, StatsClient, TIMELINE_COUNT};
 use fusepose_scene::metrics::{MetricsTable, ObjectMetric};
 use fusepose_scene::overlay::{self, OverlayObject, OverlayStyle};
 use fusepose_scene::{Intrinsics, Pose};
@@ -103,12 +101,7 @@ impl Scorer {
             .context("preparing ADD-S")?;
         let table = MetricsTable::for_objects(truth.objects());
         let n = metrics.len();
-        Ok(Self {
-            truth,
-            metrics,
-            table,
-            per_class_add_s: vec![Vec::new(); n],
-        })
+        Ok(Self { truth, metrics, table, per_class_add_s: vec![Vec::new(); n] })
     }
 
     /// Scores one message's poses; returns (objects in the scene, ADD-S values).
@@ -122,9 +115,7 @@ impl Scorer {
             };
             let (Some(t), Some(metric)) = (
                 match_truth(&truth, o.class_id, &estimate),
-                (o.class_id as usize)
-                    .checked_sub(1)
-                    .and_then(|i| self.metrics.get(i)),
+                (o.class_id as usize).checked_sub(1).and_then(|i| self.metrics.get(i)),
             ) else {
                 continue;
             };
@@ -138,11 +129,7 @@ impl Scorer {
 }
 
 fn mean(v: &[f64]) -> f64 {
-    if v.is_empty() {
-        f64::NAN
-    } else {
-        v.iter().sum::<f64>() / v.len() as f64
-    }
+    if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
 }
 
 fn median(v: &[f64]) -> f64 {
@@ -157,8 +144,7 @@ fn median(v: &[f64]) -> f64 {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let stop = Arc::new(AtomicBool::new(false));
     for signal in [signal_hook::consts::SIGINT, signal_hook::consts::SIGTERM] {
-        signal_hook::flag::register(signal, stop.clone())
-            .context("installing the signal handler")?;
+        signal_hook::flag::register(signal, stop.clone()).context("installing the signal handler")?;
     }
     // iceoryx2 reports dead peers (a camera killed by Ctrl-C) at length on
     // stderr; the summary matters more here.
@@ -166,12 +152,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("fusepose-demo-consumer"))?;
     let mut consumer = Consumer::open(&ipc, &args.camera)?;
     let objects = fusepose_scene::builtin::builtin_objects();
-    let mut scorer = Scorer::new(SyntheticTruth::new(
-        objects,
-        args.seed,
-        args.views_per_scene,
-        args.preload,
-    ))?;
+    let mut scorer = Scorer::new(SyntheticTruth::new(objects, args.seed, args.views_per_scene, args.preload))?;
 
     let started = Instant::now();
     let mut totals = Totals::default();
@@ -252,16 +233,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let daemon_stats = if interrupted {
         None
     } else {
-        StatsClient::open(&ipc, &args.camera)
-            .and_then(|c| c.query(Duration::from_secs(2)))
-            .ok()
+        StatsClient::open(&ipc, &args.camera).and_then(|c| c.query(Duration::from_secs(2))).ok()
     };
     let summary = summarise(&args, &scorer, &mut totals, elapsed, daemon_stats.as_ref());
-    std::fs::write(
-        args.out.join("summary.json"),
-        serde_json::to_string_pretty(&summary)? + "\n",
-    )
-    .with_context(|| format!("writing {}", args.out.join("summary.json").display()))?;
+    std::fs::write(args.out.join("summary.json"), serde_json::to_string_pretty(&summary)? + "\n")
+        .with_context(|| format!("writing {}", args.out.join("summary.json").display()))?;
     write_overlays(&args.out, &mut scorer, &overlay_frames)?;
     Ok(())
 }
@@ -274,17 +250,11 @@ fn summarise(
     elapsed_s: f64,
     daemon: Option<&fusepose_client::StatsSnapshot>,
 ) -> serde_json::Value {
-    let frames_sent = totals
-        .first_sequence
-        .map_or(0, |f| totals.last_sequence - f + 1);
+    let frames_sent = totals.first_sequence.map_or(0, |f| totals.last_sequence - f + 1);
     let fps = totals.messages as f64 / elapsed_s.max(1e-9);
     let lat = &mut totals.latencies_ns;
-    let (p50, p90, p99, max) = (
-        percentile(lat, 50.0),
-        percentile(lat, 90.0),
-        percentile(lat, 99.0),
-        lat.iter().copied().max().unwrap_or(0),
-    );
+    let (p50, p90, p99, max) =
+        (percentile(lat, 50.0), percentile(lat, 90.0), percentile(lat, 99.0), lat.iter().copied().max().unwrap_or(0));
     let per_frame = |n: u64| n as f64 / totals.messages.max(1) as f64;
     println!();
     println!("=== fusepose demo summary ({elapsed_s:.1} s) ===");
@@ -330,12 +300,7 @@ fn summarise(
     let all: Vec<f64> = totals.add_s_m.clone();
     for (row, add_s) in rows
         .iter()
-        .map(|r| {
-            (
-                r,
-                r.class_id.map(|c| &scorer.per_class_add_s[c as usize - 1]),
-            )
-        })
+        .map(|r| (r, r.class_id.map(|c| &scorer.per_class_add_s[c as usize - 1])))
         .chain([(&overall, Some(&all))])
     {
         let add_s = add_s.map(|v| v.as_slice()).unwrap_or(&[]);
@@ -360,9 +325,7 @@ fn summarise(
             "add_s_auc_symmetric_aware_percent": row.add_s_auc_symmetric_aware,
         }));
     }
-    println!(
-        "(ADD-S over the poses published, each matched to the true pose of its class in that frame)"
-    );
+    println!("(ADD-S over the poses published, each matched to the true pose of its class in that frame)");
     serde_json::json!({
         "seconds": elapsed_s,
         "pose_messages": totals.messages,
@@ -390,11 +353,8 @@ fn write_overlays(out: &Path, scorer: &mut Scorer, frames: &[PoseMessage]) -> an
         let set = scorer.truth.objects();
         let mut img = overlay::rgb_image(k.width, k.height, target.rgb())?;
         overlay::tint_labels(&mut img, target.labels(), 0.25)?;
-        let estimates: Vec<(u16, Pose)> = msg
-            .objects()
-            .iter()
-            .filter_map(|o| Some((o.class_id, wire_pose(o)?)))
-            .collect();
+        let estimates: Vec<(u16, Pose)> =
+            msg.objects().iter().filter_map(|o| Some((o.class_id, wire_pose(o)?))).collect();
         let truths: Vec<OverlayObject> = estimates
             .iter()
             .filter_map(|(c, p)| {
@@ -402,16 +362,10 @@ fn write_overlays(out: &Path, scorer: &mut Scorer, frames: &[PoseMessage]) -> an
                 Some(OverlayObject::new(set.by_class(*c)?, *c, t.pose).with_colour([255, 255, 255]))
             })
             .collect();
-        let thin = OverlayStyle {
-            axis_fraction: 0.0,
-            thickness: 1,
-            ..OverlayStyle::default()
-        };
+        let thin = OverlayStyle { axis_fraction: 0.0, thickness: 1, ..OverlayStyle::default() };
         overlay::draw_poses(&mut img, &k, &truths, &thin);
-        let drawn: Vec<OverlayObject> = estimates
-            .iter()
-            .filter_map(|(c, p)| Some(OverlayObject::new(set.by_class(*c)?, *c, *p)))
-            .collect();
+        let drawn: Vec<OverlayObject> =
+            estimates.iter().filter_map(|(c, p)| Some(OverlayObject::new(set.by_class(*c)?, *c, *p))).collect();
         overlay::draw_poses(&mut img, &k, &drawn, &OverlayStyle::default());
         let classes: Vec<u16> = drawn.iter().map(|o| o.class_id).collect();
         overlay::draw_legend(&mut img, &classes);

@@ -45,11 +45,7 @@ pub fn demo_config(args: &Args, ipc: &IpcOptions) -> DaemonConfig {
             weights: args.weights.clone(),
             ..defaults.estimator
         },
-        stats: StatsConfig {
-            hlog_path: PathBuf::new(),
-            summary_interval_s: 5.0,
-            ..defaults.stats
-        },
+        stats: StatsConfig { hlog_path: PathBuf::new(), summary_interval_s: 5.0, ..defaults.stats },
         ipc: IpcConfig {
             root_path: ipc.root_path.clone().unwrap_or_default(),
             prefix: ipc.prefix.clone().unwrap_or_default(),

@@ -35,12 +35,8 @@ impl NetMasks {
         boundary: Option<Boundary>,
         min_interior: Option<usize>,
     ) -> anyhow::Result<Self> {
-        let mut engine = SegEngine::load(weights, objects).with_context(|| {
-            format!(
-                "--masks net: loading the segmenter of {}",
-                weights.display()
-            )
-        })?;
+        let mut engine = SegEngine::load(weights, objects)
+            .with_context(|| format!("--masks net: loading the segmenter of {}", weights.display()))?;
         if let Some(n) = min_cells {
             engine.set_min_component_cells(n);
         }
@@ -68,10 +64,7 @@ impl NetMasks {
             intrinsics: frame.intrinsics,
             color_format: ColorFormat::Rgb8,
             color: &frame.rgb,
-            depth: DepthPlane::U16 {
-                data: &frame.depth,
-                scale: frame.depth_unit_m as f32,
-            },
+            depth: DepthPlane::U16 { data: &frame.depth, scale: frame.depth_unit_m as f32 },
             labels: None,
         };
         self.labels.resize(frame.labels.len(), 0);

@@ -19,13 +19,8 @@ use super::Args;
 
 /// Parses `WxH` (e.g. `160x120`).
 fn parse_size(s: &str) -> anyhow::Result<(usize, usize)> {
-    let (w, h) = s
-        .split_once(['x', 'X'])
-        .with_context(|| format!("--seg-size `{s}`: expected WxH"))?;
-    Ok((
-        w.trim().parse().context("--seg-size width")?,
-        h.trim().parse().context("--seg-size height")?,
-    ))
+    let (w, h) = s.split_once(['x', 'X']).with_context(|| format!("--seg-size `{s}`: expected WxH"))?;
+    Ok((w.trim().parse().context("--seg-size width")?, h.trim().parse().context("--seg-size height")?))
 }
 
 fn print_validation(v: &SegValidation) {
@@ -49,19 +44,13 @@ fn is_pose_file(path: &Path) -> bool {
 /// Writes the segmenter file `seg_path` into the pose-network file `pose_path` (objects must match).
 pub fn embed_into(seg_path: &Path, pose_path: &Path) -> anyhow::Result<()> {
     let seg = SegFile::read(seg_path).with_context(|| format!("reading {}", seg_path.display()))?;
-    let pose =
-        std::fs::read(pose_path).with_context(|| format!("reading {}", pose_path.display()))?;
+    let pose = std::fs::read(pose_path).with_context(|| format!("reading {}", pose_path.display()))?;
     let bytes = file::embed(&pose, &seg).with_context(|| {
-        format!(
-            "the segmenter {} does not fit the network file {}",
-            seg_path.display(),
-            pose_path.display()
-        )
+        format!("the segmenter {} does not fit the network file {}", seg_path.display(), pose_path.display())
     })?;
     let tmp = pose_path.with_extension("safetensors.tmp");
     std::fs::write(&tmp, bytes).with_context(|| format!("writing {}", tmp.display()))?;
-    std::fs::rename(&tmp, pose_path)
-        .with_context(|| format!("renaming to {}", pose_path.display()))?;
+    std::fs::rename(&tmp, pose_path).with_context(|| format!("renaming to {}", pose_path.display()))?;
     Ok(())
 }
 
@@ -73,12 +62,8 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         return bench(&set, args.resume.as_deref());
     }
     if args.validate_only {
-        let path = args
-            .resume
-            .as_ref()
-            .context("--validate-only needs --resume FILE")?;
-        let mut engine =
-            SegEngine::load(path, &set).with_context(|| format!("loading {}", path.display()))?;
+        let path = args.resume.as_ref().context("--validate-only needs --resume FILE")?;
+        let mut engine = SegEngine::load(path, &set).with_context(|| format!("loading {}", path.display()))?;
         print_validation(&validate::validate(&mut engine, &set, args.val_frames)?);
         return Ok(());
     }
@@ -87,8 +72,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
             let (w, h) = parse_size(s)?;
             let mut c = SegConfig::new(set.len());
             (c.input_width, c.input_height) = (w, h);
-            c.validate()
-                .map_err(|m| anyhow::anyhow!("--seg-size: {m}"))?;
+            c.validate().map_err(|m| anyhow::anyhow!("--seg-size: {m}"))?;
             Some(c)
         }
         None => None,
@@ -101,11 +85,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         );
     }
     // When embedding, the trainer writes a segmenter-only file beside the checkpoints first.
-    let seg_out = if embed {
-        args.checkpoint_dir.join("seg.safetensors")
-    } else {
-        args.out.clone()
-    };
+    let seg_out = if embed { args.checkpoint_dir.join("seg.safetensors") } else { args.out.clone() };
     let cfg = SegTrainConfig {
         objects: Arc::new(set),
         out: seg_out.clone(),
@@ -149,8 +129,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
 /// `--bench-engine`: segmentation time per 640x480 frame (median and p99 of 200).
 fn bench(set: &ObjectSet, weights: Option<&Path>) -> anyhow::Result<()> {
     let path = weights.context("--bench-engine with --stage seg needs --resume FILE")?;
-    let mut engine =
-        SegEngine::load(path, set).with_context(|| format!("loading {}", path.display()))?;
+    let mut engine = SegEngine::load(path, set).with_context(|| format!("loading {}", path.display()))?;
     let c = engine.config().clone();
     println!(
         "segmenter: {}x{} input, {} parameters, {:.1} MMAC per frame",
@@ -180,9 +159,7 @@ fn bench(set: &ObjectSet, weights: Option<&Path>) -> anyhow::Result<()> {
         let mut times: Vec<f64> = (0..200)
             .map(|_| {
                 let t = Instant::now();
-                engine
-                    .segment(&frame, &mut labels)
-                    .map(|()| t.elapsed().as_secs_f64() * 1e3)
+                engine.segment(&frame, &mut labels).map(|()| t.elapsed().as_secs_f64() * 1e3)
             })
             .collect::<Result<_, _>>()?;
         times.sort_by(f64::total_cmp);

@@ -31,12 +31,8 @@ pub struct OverlayWriter {
 /// The pose of a wire quaternion `[x, y, z, w]` and translation (metres); `None` unless finite.
 fn wire_pose(q: [f64; 4], t: [f64; 3]) -> Option<Pose> {
     let q = Quaternion::new(q[3], q[0], q[1], q[2]);
-    (q.coords.iter().chain(&t).all(|v| v.is_finite()) && q.norm() > 1e-6).then(|| {
-        Pose::from_parts(
-            Translation3::new(t[0], t[1], t[2]),
-            UnitQuaternion::from_quaternion(q),
-        )
-    })
+    (q.coords.iter().chain(&t).all(|v| v.is_finite()) && q.norm() > 1e-6)
+        .then(|| Pose::from_parts(Translation3::new(t[0], t[1], t[2]), UnitQuaternion::from_quaternion(q)))
 }
 
 impl OverlayWriter {
@@ -44,10 +40,7 @@ impl OverlayWriter {
     pub fn new(dir: &Path, objects: ObjectSet, weights: Option<&Path>) -> anyhow::Result<Self> {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
         let segmenter = weights
-            .map(|w| {
-                SegEngine::load(w, &objects)
-                    .with_context(|| format!("loading the segmenter of {}", w.display()))
-            })
+            .map(|w| SegEngine::load(w, &objects).with_context(|| format!("loading the segmenter of {}", w.display())))
             .transpose()?;
         Ok(Self {
             dir: dir.to_path_buf(),
@@ -69,42 +62,23 @@ impl OverlayWriter {
 
     /// Writes the overlay of `msg`'s frame; `None` when that frame is no longer held.
     pub fn write(&mut self, msg: &PoseMessage) -> anyhow::Result<Option<PathBuf>> {
-        let Some((header, payload)) = self
-            .frames
-            .iter()
-            .find(|(h, _)| h.sequence == msg.frame_sequence)
-        else {
+        let Some((header, payload)) = self.frames.iter().find(|(h, _)| h.sequence == msg.frame_sequence) else {
             return Ok(None);
         };
         let planes = decode_frame(header, payload, Some(msg.camera_id))
             .map_err(|e| anyhow::anyhow!("frame {}: {e}", msg.frame_sequence))?;
         let h = &planes.header;
-        let k = Intrinsics {
-            fx: h.fx,
-            fy: h.fy,
-            cx: h.cx,
-            cy: h.cy,
-            width: h.width,
-            height: h.height,
-        };
+        let k = Intrinsics { fx: h.fx, fy: h.fy, cx: h.cx, cy: h.cy, width: h.width, height: h.height };
         let pixels = h.width as usize * h.height as usize;
         self.rgb.clear();
         match planes.color_format {
             ColorFormat::Rgb8 => self.rgb.extend_from_slice(planes.color),
-            ColorFormat::Bgr8 => self.rgb.extend(
-                planes
-                    .color
-                    .chunks_exact(3)
-                    .flat_map(|p| [p[2], p[1], p[0]]),
-            ),
+            ColorFormat::Bgr8 => self.rgb.extend(planes.color.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]])),
         }
         self.labels.resize(pixels, 0);
         let labels = match (planes.labels, &mut self.segmenter) {
             (Some(LabelData::U8(l)), _) => {
-                self.labels
-                    .iter_mut()
-                    .zip(l)
-                    .for_each(|(d, &s)| *d = s as u16);
+                self.labels.iter_mut().zip(l).for_each(|(d, &s)| *d = s as u16);
                 Some(&self.labels[..])
             }
             (Some(LabelData::U16(l)), _) => Some(l),
@@ -114,9 +88,7 @@ impl OverlayWriter {
                     color_format: fusepose_estimator::ColorFormat::Rgb8,
                     color: &self.rgb,
                     depth: match planes.depth {
-                        fusepose_client::DepthData::U16 { data, scale } => {
-                            DepthPlane::U16 { data, scale }
-                        }
+                        fusepose_client::DepthData::U16 { data, scale } => DepthPlane::U16 { data, scale },
                         fusepose_client::DepthData::F32(data) => DepthPlane::F32(data),
                     },
                     labels: None,
@@ -132,9 +104,7 @@ impl OverlayWriter {
             .iter()
             .filter_map(|o| Some((o.class_id, wire_pose(o.quaternion, o.translation_m)?)))
             .collect();
-        let path = self
-            .dir
-            .join(format!("frame_{:06}.png", msg.frame_sequence));
+        let path = self.dir.join(format!("frame_{:06}.png", msg.frame_sequence));
         crate::pose_overlay::write(&path, &k, &self.rgb, labels, &poses, &self.objects)?;
         Ok(Some(path))
     }

@@ -178,7 +178,10 @@ struct CamToObj {
 }
 
 impl CamToObj {
-    const IDENTITY: CamToObj = CamToObj { r: UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(1.0, 0.0, 0.0, 0.0)), t: Vector3::new(0.0, 0.0, 0.0) };
+    const IDENTITY: CamToObj = CamToObj {
+        r: UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(1.0, 0.0, 0.0, 0.0)),
+        t: Vector3::new(0.0, 0.0, 0.0),
+    };
 
     #[inline]
     fn apply(&self, p: &Vector3<f64>) -> Vector3<f64> {
@@ -379,12 +382,10 @@ fn refine(model: &ModelCloud, cfg: &IcpConfig, s: &mut Scratch, mut tf: CamToObj
         s.distances.push(model.nearest(&tf.apply(p)).1);
     }
     let inliers = s.distances.iter().filter(|&&d| d < cfg.inlier_distance).count();
-    let threshold = trim_threshold(&s.distances, &mut s.selection, cfg.trim_fraction).min(cfg.max_correspondence_distance);
-    let (sum_sq, kept) = s
-        .distances
-        .iter()
-        .filter(|&&d| d <= threshold)
-        .fold((0.0, 0usize), |(acc, k), d| (acc + d * d, k + 1));
+    let threshold =
+        trim_threshold(&s.distances, &mut s.selection, cfg.trim_fraction).min(cfg.max_correspondence_distance);
+    let (sum_sq, kept) =
+        s.distances.iter().filter(|&&d| d <= threshold).fold((0.0, 0usize), |(acc, k), d| (acc + d * d, k + 1));
     let rmse = if kept > 0 { (sum_sq / kept as f64).sqrt() } else { f64::INFINITY };
     let inlier_fraction = inliers as f64 / count as f64;
     let confidence = (inlier_fraction * (-rmse / cfg.rmse_scale).exp()).clamp(0.0, 1.0);
@@ -394,7 +395,14 @@ fn refine(model: &ModelCloud, cfg: &IcpConfig, s: &mut Scratch, mut tf: CamToObj
 
 /// One damped point-to-plane Gauss–Newton step over every `stride`-th
 /// observed point; correspondences trimmed and rejected beyond `max_distance`.
-fn step(model: &ModelCloud, cfg: &IcpConfig, s: &mut Scratch, tf: &mut CamToObj, stride: usize, max_distance: f64) -> Step {
+fn step(
+    model: &ModelCloud,
+    cfg: &IcpConfig,
+    s: &mut Scratch,
+    tf: &mut CamToObj,
+    stride: usize,
+    max_distance: f64,
+) -> Step {
     s.distances.clear();
     s.matches.clear();
     for p in s.observed.iter().step_by(stride) {

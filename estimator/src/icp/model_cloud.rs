@@ -46,10 +46,9 @@ impl ModelCloud {
                 pca_normal(&points, &idx)
             })
             .collect();
-        let (lo, hi) = points.iter().fold(
-            (Vector3::repeat(f64::MAX), Vector3::repeat(f64::MIN)),
-            |(lo, hi), p| (lo.inf(p), hi.sup(p)),
-        );
+        let (lo, hi) = points
+            .iter()
+            .fold((Vector3::repeat(f64::MAX), Vector3::repeat(f64::MIN)), |(lo, hi), p| (lo.inf(p), hi.sup(p)));
         let centre = (lo + hi) / 2.0;
         let mean_radius = points.iter().map(|p| (p - centre).norm()).sum::<f64>() / points.len() as f64;
         Some(Self { points, normals, centre, mean_radius, tree })

@@ -62,14 +62,8 @@ impl CostModel {
             update(&mut self.pose_ns, t.pose.as_nanos() as f64 * scale);
         }
         if t.refine_iterations > 0 {
-            update(
-                &mut self.refine_setup_ns,
-                t.refine_setup.as_nanos() as f64 * scale,
-            );
-            update(
-                &mut self.refine_iter_ns,
-                t.refine.as_nanos() as f64 * scale / t.refine_iterations as f64,
-            );
+            update(&mut self.refine_setup_ns, t.refine_setup.as_nanos() as f64 * scale);
+            update(&mut self.refine_iter_ns, t.refine.as_nanos() as f64 * scale / t.refine_iterations as f64);
         }
     }
 
@@ -90,10 +84,7 @@ pub struct FramePlan {
 
 impl FramePlan {
     pub fn full(max_iterations: usize, full_points: usize) -> Self {
-        Self {
-            refine_iterations: max_iterations,
-            points: full_points,
-        }
+        Self { refine_iterations: max_iterations, points: full_points }
     }
 
     /// Whether this plan gives up anything against the full one.
@@ -112,8 +103,7 @@ pub fn plan(
     full_points: usize,
 ) -> FramePlan {
     let full = FramePlan::full(max_iterations, full_points);
-    let (Some(remaining), Some(color), Some(pose)) = (remaining, model.color_ns, model.pose_ns)
-    else {
+    let (Some(remaining), Some(color), Some(pose)) = (remaining, model.color_ns, model.pose_ns) else {
         return full;
     };
     if objects_per_thread == 0 {
@@ -124,25 +114,16 @@ pub fn plan(
     let iter = model.refine_iter_ns.unwrap_or(0.0);
     for iterations in (1..=max_iterations).rev() {
         if color + pose + setup + iterations as f64 * iter <= per_object {
-            return FramePlan {
-                refine_iterations: iterations,
-                points: full_points,
-            };
+            return FramePlan { refine_iterations: iterations, points: full_points };
         }
     }
     if color + pose <= per_object {
-        return FramePlan {
-            refine_iterations: 0,
-            points: full_points,
-        };
+        return FramePlan { refine_iterations: 0, points: full_points };
     }
     // Not even the pose net fits: fewer points (its cost scales with them).
     let fraction = ((per_object - color) / pose).clamp(MIN_POINT_FRACTION, 1.0);
     let points = ((full_points as f64 * fraction).ceil() as usize).clamp(1, full_points);
-    FramePlan {
-        refine_iterations: 0,
-        points,
-    }
+    FramePlan { refine_iterations: 0, points }
 }
 
 /// Whether one more refiner iteration of `iter_ns` still ends before `deadline`.
@@ -169,61 +150,22 @@ mod tests {
     #[test]
     fn full_plan_without_deadline_or_costs() {
         assert_eq!(plan(&model(), None, 3, 4, 256), FramePlan::full(4, 256));
-        assert_eq!(
-            plan(
-                &CostModel::default(),
-                Some(Duration::from_millis(1)),
-                3,
-                4,
-                256
-            ),
-            FramePlan::full(4, 256)
-        );
+        assert_eq!(plan(&CostModel::default(), Some(Duration::from_millis(1)), 3, 4, 256), FramePlan::full(4, 256));
     }
 
     #[test]
     fn iterations_shrink_before_points() {
         let ms = |x: f64| Some(Duration::from_secs_f64(x / 1e3));
         // 2 objects per thread; per object 0.85 * budget / 2.
-        assert_eq!(
-            plan(&model(), ms(100.0), 2, 4, 256),
-            FramePlan {
-                refine_iterations: 4,
-                points: 256
-            }
-        );
+        assert_eq!(plan(&model(), ms(100.0), 2, 4, 256), FramePlan { refine_iterations: 4, points: 256 });
         // per object 0.85 * 10 / 2 = 4.25 ms: 3 + 0.2 + 2 * 0.5 = 4.2 fits, 3 iterations (4.7) do not.
-        assert_eq!(
-            plan(&model(), ms(10.0), 2, 4, 256),
-            FramePlan {
-                refine_iterations: 2,
-                points: 256
-            }
-        );
+        assert_eq!(plan(&model(), ms(10.0), 2, 4, 256), FramePlan { refine_iterations: 2, points: 256 });
         // 3.4 ms per object: pose only.
-        assert_eq!(
-            plan(&model(), ms(8.0), 2, 4, 256),
-            FramePlan {
-                refine_iterations: 0,
-                points: 256
-            }
-        );
+        assert_eq!(plan(&model(), ms(8.0), 2, 4, 256), FramePlan { refine_iterations: 0, points: 256 });
         // 2.55 ms per object: (2.55 - 1) / 2 = 0.775 of the points.
-        assert_eq!(
-            plan(&model(), ms(6.0), 2, 4, 256),
-            FramePlan {
-                refine_iterations: 0,
-                points: 199
-            }
-        );
+        assert_eq!(plan(&model(), ms(6.0), 2, 4, 256), FramePlan { refine_iterations: 0, points: 199 });
         // Hopeless: the floor of a quarter of the points.
-        assert_eq!(
-            plan(&model(), ms(0.1), 2, 4, 256),
-            FramePlan {
-                refine_iterations: 0,
-                points: 64
-            }
-        );
+        assert_eq!(plan(&model(), ms(0.1), 2, 4, 256), FramePlan { refine_iterations: 0, points: 64 });
         assert!(plan(&model(), ms(6.0), 2, 4, 256).is_degraded(4, 256));
         assert!(!plan(&model(), ms(100.0), 2, 4, 256).is_degraded(4, 256));
     }

@@ -98,21 +98,11 @@ impl NetConfig {
             self.ref_lift[0],
             self.ref_lift[1],
         ];
-        let per_pixel = [
-            30,
-            10 * c1,
-            10 * c2,
-            10 * c3,
-            10 * c3,
-            10 * (c2 + c3),
-            self.emb,
-        ];
+        let per_pixel = [30, 10 * c1, 10 * c2, 10 * c3, 10 * c3, 10 * (c2 + c3), self.emb];
         let sum = |v: &[usize]| v.iter().fold(0usize, |a, &b| a.saturating_add(b));
         sum(&per_point)
             .saturating_mul(self.num_points)
-            .saturating_add(
-                sum(&per_pixel).saturating_mul(self.crop_size.saturating_mul(self.crop_size)),
-            )
+            .saturating_add(sum(&per_pixel).saturating_mul(self.crop_size.saturating_mul(self.crop_size)))
     }
 
     /// Width of the per-point local feature `[g1 | c1 | g2 | c2]`.
@@ -149,11 +139,7 @@ impl NetConfig {
             return Err("a layer size is zero".into());
         }
         if self.num_classes > Self::MAX_CLASSES {
-            return Err(format!(
-                "{} classes, at most {} (u16 class ids)",
-                self.num_classes,
-                Self::MAX_CLASSES
-            ));
+            return Err(format!("{} classes, at most {} (u16 class ids)", self.num_classes, Self::MAX_CLASSES));
         }
         if self.crop_size > Self::MAX_CROP_SIZE || self.num_points > Self::MAX_POINTS {
             return Err(format!(
@@ -168,11 +154,7 @@ impl NetConfig {
             return Err(format!("layer width {w} exceeds {}", Self::MAX_WIDTH));
         }
         if self.refine_iters > Self::MAX_REFINE_ITERS {
-            return Err(format!(
-                "{} refiner iterations, at most {}",
-                self.refine_iters,
-                Self::MAX_REFINE_ITERS
-            ));
+            return Err(format!("{} refiner iterations, at most {}", self.refine_iters, Self::MAX_REFINE_ITERS));
         }
         let floats = self.activation_floats();
         if floats > Self::MAX_ACTIVATION_FLOATS {
@@ -184,10 +166,7 @@ impl NetConfig {
             ));
         }
         if !self.crop_size.is_multiple_of(4) {
-            return Err(format!(
-                "crop size {} is not divisible by 4",
-                self.crop_size
-            ));
+            return Err(format!("crop size {} is not divisible by 4", self.crop_size));
         }
         if !(self.geo_scale.is_finite()
             && self.geo_scale > 0.0
@@ -250,11 +229,7 @@ impl NetConfig {
     /// for `n` points and an `s`×`s` crop.
     pub fn flops_per_object(&self, n: usize, s: usize, iters: usize) -> f64 {
         let [c1, c2, c3] = self.cnn;
-        let (s1, s2, s4) = (
-            (s * s) as f64,
-            ((s / 2) * (s / 2)) as f64,
-            ((s / 4) * (s / 4)) as f64,
-        );
+        let (s1, s2, s4) = ((s * s) as f64, ((s / 2) * (s / 2)) as f64, ((s / 4) * (s / 4)) as f64);
         let n = n as f64;
         let f = |v: usize| v as f64;
         let cnn = s1 * f(c1 * 27)
@@ -265,27 +240,19 @@ impl NetConfig {
         let [g0, g1] = self.geo;
         let [k0, k1] = self.col;
         let lw = self.local_width();
-        let pose = n * f(3 * g0
-            + g0 * g1
-            + self.emb * k0
-            + k0 * k1
-            + (g1 + k1) * self.lift[0]
-            + self.lift[0] * self.lift[1])
-            + n * f(lw * self.trunk[0] + self.trunk[0] * self.trunk[1] + self.trunk[1] * 8)
-            + f(self.lift[1] * self.trunk[0]);
+        let pose =
+            n * f(3 * g0 + g0 * g1 + self.emb * k0 + k0 * k1 + (g1 + k1) * self.lift[0] + self.lift[0] * self.lift[1])
+                + n * f(lw * self.trunk[0] + self.trunk[0] * self.trunk[1] + self.trunk[1] * 8)
+                + f(self.lift[1] * self.trunk[0]);
         let ref_color = n * f(self.emb * k0 + k0 * k1);
-        let ref_iter =
-            n * f(3 * g0 + g0 * g1 + lw * self.ref_lift[0] + self.ref_lift[0] * self.ref_lift[1])
-                + f(self.ref_lift[1] * self.ref_head + self.ref_head * 7);
+        let ref_iter = n * f(3 * g0 + g0 * g1 + lw * self.ref_lift[0] + self.ref_lift[0] * self.ref_lift[1])
+            + f(self.ref_lift[1] * self.ref_head + self.ref_head * 7);
         2.0 * (cnn + pose + if iters > 0 { ref_color } else { 0.0 } + iters as f64 * ref_iter)
     }
 
     /// Number of parameters.
     pub fn parameter_count(&self) -> usize {
-        self.tensor_shapes()
-            .iter()
-            .map(|(_, s)| s.iter().product::<usize>())
-            .sum()
+        self.tensor_shapes().iter().map(|(_, s)| s.iter().product::<usize>()).sum()
     }
 }
 

@@ -20,33 +20,15 @@ struct Dense {
 }
 
 impl Dense {
-    fn load(
-        f: &WeightFile,
-        name: &str,
-        i: usize,
-        o: usize,
-        bias: bool,
-    ) -> Result<Self, NetLoadError> {
+    fn load(f: &WeightFile, name: &str, i: usize, o: usize, bias: bool) -> Result<Self, NetLoadError> {
         let w = Array2::from_shape_vec((i, o), f.tensor(&format!("{name}.weight"))?.to_vec())
             .map_err(|_| NetLoadError::MissingTensor(format!("{name}.weight")))?;
-        let b = if bias {
-            Some(Array1::from_vec(
-                f.tensor(&format!("{name}.bias"))?.to_vec(),
-            ))
-        } else {
-            None
-        };
+        let b = if bias { Some(Array1::from_vec(f.tensor(&format!("{name}.bias"))?.to_vec())) } else { None };
         Ok(Self { w, b })
     }
 
     fn run(&self, x: ArrayView2<f32>, relu: bool, out: ArrayViewMut2<f32>) {
-        dense(
-            x,
-            self.w.view(),
-            self.b.as_ref().map(|b| b.view()),
-            relu,
-            out,
-        );
+        dense(x, self.w.view(), self.b.as_ref().map(|b| b.view()), relu, out);
     }
 
     /// Columns `[k*w, (k+1)*w)` only: the head row of class k.
@@ -71,39 +53,14 @@ impl Conv {
         let w = Array2::from_shape_vec((o, i * 9), f.tensor(&format!("{name}.weight"))?.to_vec())
             .map_err(|_| NetLoadError::MissingTensor(format!("{name}.weight")))?;
         let b = Array1::from_vec(f.tensor(&format!("{name}.bias"))?.to_vec());
-        Ok(Self {
-            w,
-            b,
-            c_in: i,
-            c_out: o,
-        })
+        Ok(Self { w, b, c_in: i, c_out: o })
     }
 
-    fn run(
-        &self,
-        input: &[f32],
-        h: usize,
-        w: usize,
-        stride: usize,
-        cols: &mut [f32],
-        out: &mut [f32],
-    ) {
+    fn run(&self, input: &[f32], h: usize, w: usize, stride: usize, cols: &mut [f32], out: &mut [f32]) {
         let ho = (h - 1) / stride + 1;
         let wo = (w - 1) / stride + 1;
-        let out =
-            ArrayViewMut2::from_shape((self.c_out, ho * wo), &mut out[..self.c_out * ho * wo])
-                .expect("conv out");
-        conv3x3(
-            input,
-            self.c_in,
-            h,
-            w,
-            stride,
-            self.w.view(),
-            self.b.view(),
-            cols,
-            out,
-        );
+        let out = ArrayViewMut2::from_shape((self.c_out, ho * wo), &mut out[..self.c_out * ho * wo]).expect("conv out");
+        conv3x3(input, self.c_in, h, w, stride, self.w.view(), self.b.view(), cols, out);
     }
 }
 
@@ -283,12 +240,7 @@ pub fn quat_matrix(q: [f32; 4]) -> Matrix3<f32> {
 
 /// The unit quaternion of a raw `[x, y, z, w]` output (f64).
 pub fn unit_quat(q: [f32; 4]) -> UnitQuaternion<f64> {
-    UnitQuaternion::from_quaternion(Quaternion::new(
-        q[3] as f64,
-        q[0] as f64,
-        q[1] as f64,
-        q[2] as f64,
-    ))
+    UnitQuaternion::from_quaternion(Quaternion::new(q[3] as f64, q[0] as f64, q[1] as f64, q[2] as f64))
 }
 
 impl Engine {
@@ -361,8 +313,7 @@ impl Engine {
         self.e1.run(&sc.crop, s, s, 1, &mut sc.cols, &mut sc.e1);
         self.e2.run(&sc.e1, s, s, 2, &mut sc.cols, &mut sc.e2);
         self.e3.run(&sc.e2, h, h, 2, &mut sc.cols, &mut sc.e3);
-        self.e4
-            .run(&sc.e3, s / 4, s / 4, 1, &mut sc.cols, &mut sc.e4);
+        self.e4.run(&sc.e3, s / 4, s / 4, 1, &mut sc.cols, &mut sc.e4);
         // Nearest ×2 upsampling of e4, then e2: the decoder input [c3 + c2, S/2, S/2].
         let q = s / 4;
         for ch in 0..c3 {
@@ -501,12 +452,7 @@ impl Engine {
         self.r[RM1].run(sc.rglob.view(), true, sc.rm.view_mut());
         self.r[RROT].run_cols(sc.rm.view(), k, 4, sc.rrot.view_mut());
         self.r[RTRA].run_cols(sc.rm.view(), k, 3, sc.rtra.view_mut());
-        let q = [
-            sc.rrot[[0, 0]],
-            sc.rrot[[0, 1]],
-            sc.rrot[[0, 2]],
-            sc.rrot[[0, 3]] + 1.0,
-        ];
+        let q = [sc.rrot[[0, 0]], sc.rrot[[0, 1]], sc.rrot[[0, 2]], sc.rrot[[0, 3]] + 1.0];
         let dr = quat_matrix(q);
         let dt = Vector3::new(sc.rtra[[0, 0]], sc.rtra[[0, 1]], sc.rtra[[0, 2]]) * c.offset_scale;
         (rot * dr, trans + rot * dt)

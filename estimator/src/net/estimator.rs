@@ -46,12 +46,7 @@ pub struct NetOptions {
 impl Default for NetOptions {
     fn default() -> Self {
         let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
-        Self {
-            refine_iterations: None,
-            threads: cores.clamp(1, 2),
-            tracking: None,
-            pin_worker_cpu: None,
-        }
+        Self { refine_iterations: None, threads: cores.clamp(1, 2), tracking: None, pin_worker_cpu: None }
     }
 }
 
@@ -176,7 +171,14 @@ fn estimate_instance(
     }
 }
 
-fn finish_pose(inst: crate::Instance, i: usize, rot: &Matrix3<f32>, t: &Vector3<f32>, confidence: f32, iterations: usize) -> ObjectPose {
+fn finish_pose(
+    inst: crate::Instance,
+    i: usize,
+    rot: &Matrix3<f32>,
+    t: &Vector3<f32>,
+    confidence: f32,
+    iterations: usize,
+) -> ObjectPose {
     // Bounded: `from_matrix` iterates until convergence, which never comes
     // for a non-finite matrix (e.g. from NaN weights), and hung `estimate`
     // forever (found with the `model` fuzz harness, docs/RELIABILITY.md).
@@ -227,10 +229,7 @@ struct Slot<T> {
 
 impl<T> Slot<T> {
     fn new() -> Self {
-        Self {
-            value: Mutex::new(None),
-            cv: Condvar::new(),
-        }
+        Self { value: Mutex::new(None), cv: Condvar::new() }
     }
 
     fn put(&self, t: T) {
@@ -268,12 +267,16 @@ struct Worker {
 }
 
 impl Worker {
-    fn spawn(engine: Arc<Engine>, fit: Option<Arc<FitCheck>>, pin: Option<usize>, n: usize, s: usize, cap: usize) -> Option<Self> {
-        let shared = Arc::new(Shared {
-            msg: Slot::new(),
-            done: Slot::new(),
-            results: Mutex::new(Vec::with_capacity(cap)),
-        });
+    fn spawn(
+        engine: Arc<Engine>,
+        fit: Option<Arc<FitCheck>>,
+        pin: Option<usize>,
+        n: usize,
+        s: usize,
+        cap: usize,
+    ) -> Option<Self> {
+        let shared =
+            Arc::new(Shared { msg: Slot::new(), done: Slot::new(), results: Mutex::new(Vec::with_capacity(cap)) });
         let sh = shared.clone();
         let handle = std::thread::Builder::new()
             .name("fusepose-net".into())
@@ -309,10 +312,7 @@ impl Worker {
                         }
                         Msg::Resize(n, s, cap) => {
                             sc = Scratch::new(&engine.config, n, s);
-                            sh.results
-                                .lock()
-                                .unwrap_or_else(|e| e.into_inner())
-                                .reserve(cap);
+                            sh.results.lock().unwrap_or_else(|e| e.into_inner()).reserve(cap);
                             sh.done.put(true);
                         }
                         Msg::Stop => break,
@@ -320,10 +320,7 @@ impl Worker {
                 }
             })
             .ok()?;
-        Some(Self {
-            shared,
-            handle: Some(handle),
-        })
+        Some(Self { shared, handle: Some(handle) })
     }
 }
 
@@ -395,21 +392,13 @@ pub struct NetEstimator {
 impl NetEstimator {
     /// Loads a weight file and checks it against `objects` (names, symmetries,
     /// diameters, mesh hashes, in class order).
-    pub fn load(
-        path: &Path,
-        objects: &ObjectSet,
-        options: NetOptions,
-    ) -> Result<Self, NetLoadError> {
+    pub fn load(path: &Path, objects: &ObjectSet, options: NetOptions) -> Result<Self, NetLoadError> {
         let file = WeightFile::read(path)?;
         Self::from_file(file, objects, options)
     }
 
     /// As [`NetEstimator::load`], from an already parsed file.
-    pub fn from_file(
-        file: WeightFile,
-        objects: &ObjectSet,
-        options: NetOptions,
-    ) -> Result<Self, NetLoadError> {
+    pub fn from_file(file: WeightFile, objects: &ObjectSet, options: NetOptions) -> Result<Self, NetLoadError> {
         file.check_objects(objects)?;
         let engine = Arc::new(Engine::new(&file)?);
         let c = &engine.config;
@@ -506,11 +495,7 @@ impl NetEstimator {
     }
 
     fn fit(&mut self, ws: &Workspace) {
-        let want = (
-            ws.config.num_points,
-            ws.config.crop_size,
-            ws.config.max_instances,
-        );
+        let want = (ws.config.num_points, ws.config.crop_size, ws.config.max_instances);
         if want == self.sizes {
             return;
         }
@@ -571,24 +556,12 @@ impl Estimator for NetEstimator {
         self.last_degraded
     }
 
-    fn estimate(
-        &mut self,
-        _frame: &FrameView<'_>,
-        ws: &mut Workspace,
-        out: &mut PoseSet,
-    ) -> Result<(), EstimateError> {
+    fn estimate(&mut self, _frame: &FrameView<'_>, ws: &mut Workspace, out: &mut PoseSet) -> Result<(), EstimateError> {
         out.clear();
-        let max_iterations = self
-            .frame_cap
-            .take()
-            .map_or(self.refine_iterations, |c| c.min(self.refine_iterations));
+        let max_iterations = self.frame_cap.take().map_or(self.refine_iterations, |c| c.min(self.refine_iterations));
         let deadline = self.deadline;
         let k_max = self.engine.config.num_classes;
-        if let Some(bad) = ws
-            .instances
-            .iter()
-            .find(|i| i.class_id == 0 || i.class_id as usize > k_max)
-        {
+        if let Some(bad) = ws.instances.iter().find(|i| i.class_id == 0 || i.class_id as usize > k_max) {
             return Err(EstimateError::UnknownClass(bad.class_id));
         }
         self.fit(ws);
@@ -603,17 +576,11 @@ impl Estimator for NetEstimator {
         self.last_degraded = plan.is_degraded(max_iterations, full_points);
         self.counters.degraded_frames += self.last_degraded as u64;
         let tracking = self.tracks.as_ref().map(|t| *t.config());
-        let (max_fit_m, tracking_iterations) = tracking.map_or((f64::NAN, 0), |t| (t.max_fit_m, t.refine_iterations.max(1)));
+        let (max_fit_m, tracking_iterations) =
+            tracking.map_or((f64::NAN, 0), |t| (t.max_fit_m, t.refine_iterations.max(1)));
         let iter_ns = self.costs.refine_iter_ns(plan.points, full_points);
         let fit = self.fit.clone();
-        let job = FrameJob {
-            plan,
-            deadline,
-            iter_ns,
-            fit: fit.as_deref(),
-            max_fit_m,
-            tracking_iterations,
-        };
+        let job = FrameJob { plan, deadline, iter_ns, fit: fit.as_deref(), max_fit_m, tracking_iterations };
         self.mine.clear();
         let mut mine = std::mem::take(&mut self.mine);
         if threads == 2
@@ -629,10 +596,7 @@ impl Estimator for NetEstimator {
                 tracking_iterations,
                 check_fit: job.fit.is_some(),
             }));
-            let guard = WaitGuard {
-                shared: &w.shared,
-                ok: None,
-            };
+            let guard = WaitGuard { shared: &w.shared, ok: None };
             for i in (0..count).step_by(2) {
                 mine.push(estimate_instance(&self.engine, &mut self.scratch, ws, i, self.priors[i], &job));
             }

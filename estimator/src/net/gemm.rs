@@ -47,11 +47,7 @@ pub fn gemm_acc(a: ArrayView2<f32>, b: ArrayView2<f32>, c: &mut ArrayViewMut2<f3
         }
         return;
     }
-    let (lda, ldb, ldc) = (
-        a.strides()[0] as usize,
-        b.strides()[0] as usize,
-        c.strides()[0] as usize,
-    );
+    let (lda, ldb, ldc) = (a.strides()[0] as usize, b.strides()[0] as usize, c.strides()[0] as usize);
     let (pa, pb, pc) = (a.as_ptr(), b.as_ptr(), c.as_mut_ptr());
     // SAFETY: the views cover rows*stride elements with unit column stride, so every
     // (i, p), (p, j), (i, j) offset used below lies inside its view.
@@ -235,11 +231,7 @@ pub fn conv3x3(
                     let src = &plane[iy as usize * w_in..(iy as usize + 1) * w_in];
                     for (ox, d) in dst.iter_mut().enumerate() {
                         let ix = (ox * stride + kx) as isize - 1;
-                        *d = if ix < 0 || ix >= w_in as isize {
-                            0.0
-                        } else {
-                            src[ix as usize]
-                        };
+                        *d = if ix < 0 || ix >= w_in as isize { 0.0 } else { src[ix as usize] };
                     }
                 }
             }
@@ -270,20 +262,9 @@ mod tests {
 
     #[test]
     fn gemm_matches_naive_for_odd_shapes_and_strided_views() {
-        for &(m, k, n) in &[
-            (1, 1, 1),
-            (7, 5, 3),
-            (13, 27, 40),
-            (6, 64, 16),
-            (257, 33, 25),
-            (5, 9, 8),
-        ] {
-            let a = Array2::from_shape_fn((m, k + 3), |(i, j)| {
-                ((i * 31 + j * 7) % 13) as f32 * 0.1 - 0.6
-            });
-            let b = Array2::from_shape_fn((k, n + 2), |(i, j)| {
-                ((i * 11 + j * 5) % 17) as f32 * 0.05 - 0.4
-            });
+        for &(m, k, n) in &[(1, 1, 1), (7, 5, 3), (13, 27, 40), (6, 64, 16), (257, 33, 25), (5, 9, 8)] {
+            let a = Array2::from_shape_fn((m, k + 3), |(i, j)| ((i * 31 + j * 7) % 13) as f32 * 0.1 - 0.6);
+            let b = Array2::from_shape_fn((k, n + 2), |(i, j)| ((i * 11 + j * 5) % 17) as f32 * 0.05 - 0.4);
             let av = a.slice(s![.., 1..k + 1]);
             let bv = b.slice(s![.., 2..]);
             let mut c = Array2::from_elem((m, n + 4), 1.0f32);
@@ -292,10 +273,7 @@ mod tests {
             let expect = av.dot(&bv);
             for i in 0..m {
                 for j in 0..n {
-                    assert!(
-                        (c[[i, j + 4]] - 1.0 - expect[[i, j]]).abs() < 1e-4,
-                        "{m}x{k}x{n} at {i},{j}"
-                    );
+                    assert!((c[[i, j + 4]] - 1.0 - expect[[i, j]]).abs() < 1e-4, "{m}x{k}x{n} at {i},{j}");
                 }
                 for j in 0..4 {
                     assert_eq!(c[[i, j]], 1.0, "untouched columns");
@@ -313,29 +291,15 @@ mod tests {
     }
 
     fn conv_case(c_in: usize, h: usize, wd: usize) {
-        let input: Vec<f32> = (0..c_in * h * wd)
-            .map(|i| ((i * 7) % 11) as f32 - 5.0)
-            .collect();
-        let weight = Array2::from_shape_fn((3, c_in * 9), |(o, k)| {
-            ((o * 13 + k * 5) % 7) as f32 * 0.1 - 0.3
-        });
+        let input: Vec<f32> = (0..c_in * h * wd).map(|i| ((i * 7) % 11) as f32 - 5.0).collect();
+        let weight = Array2::from_shape_fn((3, c_in * 9), |(o, k)| ((o * 13 + k * 5) % 7) as f32 * 0.1 - 0.3);
         let bias = Array1::from_vec(vec![0.1, -0.2, 0.3]);
         for stride in [1usize, 2] {
             let ho = (h - 1) / stride + 1;
             let wo = (wd - 1) / stride + 1;
             let mut cols = vec![0.0; cols_len(c_in, ho * wo)];
             let mut out = Array2::zeros((3, ho * wo));
-            conv3x3(
-                &input,
-                c_in,
-                h,
-                wd,
-                stride,
-                weight.view(),
-                bias.view(),
-                &mut cols,
-                out.view_mut(),
-            );
+            conv3x3(&input, c_in, h, wd, stride, weight.view(), bias.view(), &mut cols, out.view_mut());
             for o in 0..3 {
                 for oy in 0..ho {
                     for ox in 0..wo {
@@ -345,8 +309,7 @@ mod tests {
                                 for kx in 0..3 {
                                     let iy = (oy * stride + ky) as isize - 1;
                                     let ix = (ox * stride + kx) as isize - 1;
-                                    if iy >= 0 && ix >= 0 && (iy as usize) < h && (ix as usize) < wd
-                                    {
+                                    if iy >= 0 && ix >= 0 && (iy as usize) < h && (ix as usize) < wd {
                                         s += weight[[o, c * 9 + ky * 3 + kx]]
                                             * input[c * h * wd + iy as usize * wd + ix as usize];
                                     }

@@ -26,33 +26,19 @@ pub enum NetLoadError {
     #[error("metadata `{key}` is invalid: {message}")]
     BadMetadata { key: &'static str, message: String },
     #[error("file format `{found}` is not supported (expected `{expected}`)")]
-    UnsupportedFormat {
-        found: String,
-        expected: &'static str,
-    },
+    UnsupportedFormat { found: String, expected: &'static str },
     #[error("tensor `{0}` is missing")]
     MissingTensor(String),
     #[error("the network file has no segmenter embedded (train one: `fusepose train --stage seg`)")]
     NoSegmenter,
     #[error("tensor `{name}` has shape {got:?}, expected {expected:?}")]
-    WrongShape {
-        name: String,
-        expected: Vec<usize>,
-        got: Vec<usize>,
-    },
+    WrongShape { name: String, expected: Vec<usize>, got: Vec<usize> },
     #[error("tensor `{name}` has dtype {dtype}, expected F32")]
     WrongDtype { name: String, dtype: String },
     #[error("the network was trained for {file} objects, the object set has {set}")]
     ObjectCount { file: usize, set: usize },
-    #[error(
-        "class {class}: the network's object `{file_name}` differs from the set's `{set_name}` in {what}"
-    )]
-    ObjectMismatch {
-        class: usize,
-        file_name: String,
-        set_name: String,
-        what: &'static str,
-    },
+    #[error("class {class}: the network's object `{file_name}` differs from the set's `{set_name}` in {what}")]
+    ObjectMismatch { class: usize, file_name: String, set_name: String, what: &'static str },
 }
 
 /// A parsed, checked weight file.
@@ -69,101 +55,52 @@ pub struct WeightFile {
 impl WeightFile {
     /// Reads and checks a file (format tag, config, every tensor's presence, dtype and shape).
     pub fn read(path: &Path) -> Result<Self, NetLoadError> {
-        let bytes = std::fs::read(path).map_err(|source| NetLoadError::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let bytes = std::fs::read(path).map_err(|source| NetLoadError::Io { path: path.to_path_buf(), source })?;
         Self::from_bytes(&bytes)
     }
 
     pub fn from_bytes(bytes: &[u8]) -> Result<Self, NetLoadError> {
-        let (_, header) =
-            SafeTensors::read_metadata(bytes).map_err(|e| NetLoadError::Format(e.to_string()))?;
+        let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| NetLoadError::Format(e.to_string()))?;
         let metadata = header.metadata().clone().unwrap_or_default();
-        let st =
-            SafeTensors::deserialize(bytes).map_err(|e| NetLoadError::Format(e.to_string()))?;
+        let st = SafeTensors::deserialize(bytes).map_err(|e| NetLoadError::Format(e.to_string()))?;
         let get = |key: &'static str| metadata.get(key).ok_or(NetLoadError::MissingMetadata(key));
         let format = get(meta::KEY_FORMAT)?;
         if format != meta::FORMAT {
-            return Err(NetLoadError::UnsupportedFormat {
-                found: format.clone(),
-                expected: meta::FORMAT,
-            });
+            return Err(NetLoadError::UnsupportedFormat { found: format.clone(), expected: meta::FORMAT });
         }
-        let config: NetConfig = serde_json::from_str(get(meta::KEY_CONFIG)?).map_err(|e| {
-            NetLoadError::BadMetadata {
-                key: meta::KEY_CONFIG,
-                message: e.to_string(),
-            }
-        })?;
-        config
-            .validate()
-            .map_err(|message| NetLoadError::BadMetadata {
-                key: meta::KEY_CONFIG,
-                message,
-            })?;
-        let objects: Vec<ObjectEntry> =
-            serde_json::from_str(get(meta::KEY_OBJECTS)?).map_err(|e| {
-                NetLoadError::BadMetadata {
-                    key: meta::KEY_OBJECTS,
-                    message: e.to_string(),
-                }
-            })?;
+        let config: NetConfig = serde_json::from_str(get(meta::KEY_CONFIG)?)
+            .map_err(|e| NetLoadError::BadMetadata { key: meta::KEY_CONFIG, message: e.to_string() })?;
+        config.validate().map_err(|message| NetLoadError::BadMetadata { key: meta::KEY_CONFIG, message })?;
+        let objects: Vec<ObjectEntry> = serde_json::from_str(get(meta::KEY_OBJECTS)?)
+            .map_err(|e| NetLoadError::BadMetadata { key: meta::KEY_OBJECTS, message: e.to_string() })?;
         if objects.len() != config.num_classes {
             return Err(NetLoadError::BadMetadata {
                 key: meta::KEY_OBJECTS,
-                message: format!(
-                    "{} objects for {} classes",
-                    objects.len(),
-                    config.num_classes
-                ),
+                message: format!("{} objects for {} classes", objects.len(), config.num_classes),
             });
         }
-        let train = metadata
-            .get(meta::KEY_TRAIN)
-            .and_then(|s| serde_json::from_str(s).ok());
+        let train = metadata.get(meta::KEY_TRAIN).and_then(|s| serde_json::from_str(s).ok());
         let mut tensors = HashMap::new();
         for (name, shape) in config.tensor_shapes() {
-            let view = st
-                .tensor(&name)
-                .map_err(|_| NetLoadError::MissingTensor(name.clone()))?;
+            let view = st.tensor(&name).map_err(|_| NetLoadError::MissingTensor(name.clone()))?;
             if view.dtype() != Dtype::F32 {
-                return Err(NetLoadError::WrongDtype {
-                    name,
-                    dtype: format!("{:?}", view.dtype()),
-                });
+                return Err(NetLoadError::WrongDtype { name, dtype: format!("{:?}", view.dtype()) });
             }
             if view.shape() != shape.as_slice() {
-                return Err(NetLoadError::WrongShape {
-                    name,
-                    expected: shape,
-                    got: view.shape().to_vec(),
-                });
+                return Err(NetLoadError::WrongShape { name, expected: shape, got: view.shape().to_vec() });
             }
-            let data: Vec<f32> = view
-                .data()
-                .chunks_exact(4)
-                .map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]]))
-                .collect();
+            let data: Vec<f32> =
+                view.data().chunks_exact(4).map(|c| f32::from_le_bytes([c[0], c[1], c[2], c[3]])).collect();
             tensors.insert(name, (shape, data));
         }
-        Ok(Self {
-            config,
-            objects,
-            train,
-            metadata,
-            tensors,
-        })
+        Ok(Self { config, objects, train, metadata, tensors })
     }
 
     /// Checks that the file was trained for exactly this object set (names, symmetries,
     /// diameters and mesh/sample hashes, in class order).
     pub fn check_objects(&self, set: &ObjectSet) -> Result<(), NetLoadError> {
         if set.len() != self.objects.len() {
-            return Err(NetLoadError::ObjectCount {
-                file: self.objects.len(),
-                set: set.len(),
-            });
+            return Err(NetLoadError::ObjectCount { file: self.objects.len(), set: set.len() });
         }
         for (i, (f, m)) in self.objects.iter().zip(&set.objects).enumerate() {
             let s = ObjectEntry::of(m);
@@ -193,9 +130,6 @@ impl WeightFile {
     /// A tensor's data (row-major); present by construction for every name of
     /// [`NetConfig::tensor_shapes`].
     pub fn tensor(&self, name: &str) -> Result<&[f32], NetLoadError> {
-        self.tensors
-            .get(name)
-            .map(|(_, d)| d.as_slice())
-            .ok_or_else(|| NetLoadError::MissingTensor(name.to_string()))
+        self.tensors.get(name).map(|(_, d)| d.as_slice()).ok_or_else(|| NetLoadError::MissingTensor(name.to_string()))
     }
 }

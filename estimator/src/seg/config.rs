@@ -113,11 +113,7 @@ impl SegConfig {
         let at = |level: usize| s[level].0 * s[level].1;
         // Output resolution of each layer in `layers()` order.
         let levels = [1, 2, 3, 4, 3, 2, 1, 1];
-        self.layers()
-            .into_iter()
-            .zip(levels)
-            .map(|((_, i, o, k, _), l)| at(l) * o * i * k * k)
-            .sum()
+        self.layers().into_iter().zip(levels).map(|((_, i, o, k, _), l)| at(l) * o * i * k * k).sum()
     }
 }
 

@@ -385,7 +385,14 @@ impl SegEngine {
         let [d3c, d2c, d1c] = self.config.dec;
         let l = &self.layers;
         let cols = &mut self.cols;
-        let conv = |li: usize, input: &[f32], c_in: usize, lvl: usize, stride: usize, cols: &mut [f32], out: &mut [f32], out_lvl: usize| {
+        let conv = |li: usize,
+                    input: &[f32],
+                    c_in: usize,
+                    lvl: usize,
+                    stride: usize,
+                    cols: &mut [f32],
+                    out: &mut [f32],
+                    out_lvl: usize| {
             let o = l[li].w.nrows();
             let view = ArrayViewMut2::from_shape((o, hw(out_lvl)), &mut out[..o * hw(out_lvl)]).expect("layer buffer");
             conv3x3(input, c_in, s[lvl].0, s[lvl].1, stride, l[li].w.view(), l[li].b.view(), cols, view);

@@ -55,8 +55,7 @@ fn bad(key: &'static str, message: impl ToString) -> NetLoadError {
 impl SegFile {
     /// Reads and checks a file.
     pub fn read(path: &Path) -> Result<Self, NetLoadError> {
-        let bytes =
-            std::fs::read(path).map_err(|source| NetLoadError::Io { path: path.to_path_buf(), source })?;
+        let bytes = std::fs::read(path).map_err(|source| NetLoadError::Io { path: path.to_path_buf(), source })?;
         Self::from_bytes(&bytes)
     }
 
@@ -80,16 +79,16 @@ impl SegFile {
         };
         let config: SegConfig = serde_json::from_str(get(KEY_CONFIG)?).map_err(|e| bad(KEY_CONFIG, e))?;
         config.validate().map_err(|m| bad(KEY_CONFIG, m))?;
-        let objects: Vec<ObjectEntry> =
-            serde_json::from_str(get(key_objects)?).map_err(|e| bad(key_objects, e))?;
+        let objects: Vec<ObjectEntry> = serde_json::from_str(get(key_objects)?).map_err(|e| bad(key_objects, e))?;
         if objects.len() != config.num_classes {
             return Err(bad(key_objects, format!("{} objects for {} classes", objects.len(), config.num_classes)));
         }
         let train = metadata.get(key_train).and_then(|s| serde_json::from_str(s).ok());
         let mut tensors = HashMap::new();
         for (name, shape) in config.tensor_shapes() {
-            let view =
-                st.tensor(&format!("{prefix}{name}")).map_err(|_| NetLoadError::MissingTensor(format!("{prefix}{name}")))?;
+            let view = st
+                .tensor(&format!("{prefix}{name}"))
+                .map_err(|_| NetLoadError::MissingTensor(format!("{prefix}{name}")))?;
             if view.dtype() != Dtype::F32 {
                 return Err(NetLoadError::WrongDtype { name, dtype: format!("{:?}", view.dtype()) });
             }
@@ -125,7 +124,12 @@ impl SegFile {
             } else {
                 continue;
             };
-            return Err(NetLoadError::ObjectMismatch { class: i + 1, file_name: f.name.clone(), set_name: s.name, what });
+            return Err(NetLoadError::ObjectMismatch {
+                class: i + 1,
+                file_name: f.name.clone(),
+                set_name: s.name,
+                what,
+            });
         }
         Ok(())
     }
@@ -147,16 +151,24 @@ pub fn embed(pose: &[u8], seg: &SegFile) -> Result<Vec<u8>, NetLoadError> {
     }
     for (i, (s, n)) in seg.objects.iter().zip(&net.objects).enumerate() {
         if s != n {
-            let what = if s.name != n.name { "name" } else if s.hash != n.hash { "mesh or sample points (hash)" } else { "symmetry or diameter" };
-            return Err(NetLoadError::ObjectMismatch { class: i + 1, file_name: s.name.clone(), set_name: n.name.clone(), what });
+            let what = if s.name != n.name {
+                "name"
+            } else if s.hash != n.hash {
+                "mesh or sample points (hash)"
+            } else {
+                "symmetry or diameter"
+            };
+            return Err(NetLoadError::ObjectMismatch {
+                class: i + 1,
+                file_name: s.name.clone(),
+                set_name: n.name.clone(),
+                what,
+            });
         }
     }
     let st = SafeTensors::deserialize(pose).map_err(|e| NetLoadError::Format(e.to_string()))?;
-    let mut tensors: Vec<(String, safetensors::tensor::TensorView<'_>)> = st
-        .tensors()
-        .into_iter()
-        .filter(|(name, _)| !name.starts_with(EMBEDDED_PREFIX))
-        .collect();
+    let mut tensors: Vec<(String, safetensors::tensor::TensorView<'_>)> =
+        st.tensors().into_iter().filter(|(name, _)| !name.starts_with(EMBEDDED_PREFIX)).collect();
     let seg_bytes: Vec<(String, Vec<usize>, Vec<u8>)> = seg
         .config
         .tensor_shapes()
@@ -184,4 +196,3 @@ pub fn embed(pose: &[u8], seg: &SegFile) -> Result<Vec<u8>, NetLoadError> {
     }
     safetensors::serialize(tensors, Some(metadata)).map_err(|e| NetLoadError::Format(e.to_string()))
 }
-

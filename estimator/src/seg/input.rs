@@ -268,7 +268,13 @@ mod tests {
                 let p = v * w + u;
                 color[3 * p] = 100;
                 color[3 * p + 2] = 7;
-                depth[p] = if u < 2 { 10_000 } else if v < 2 { 20_000 } else { 0 };
+                depth[p] = if u < 2 {
+                    10_000
+                } else if v < 2 {
+                    20_000
+                } else {
+                    0
+                };
             }
         }
         let frame = FrameView {

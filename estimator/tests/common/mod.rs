@@ -36,9 +36,10 @@ pub fn step_block() -> BoxObject {
 
 impl BoxObject {
     fn inside_other(&self, p: &Vector3<f64>, skip: usize) -> bool {
-        self.boxes.iter().enumerate().any(|(i, (lo, hi))| {
-            i != skip && (0..3).all(|a| p[a] > lo[a] + 1e-9 && p[a] < hi[a] - 1e-9)
-        })
+        self.boxes
+            .iter()
+            .enumerate()
+            .any(|(i, (lo, hi))| i != skip && (0..3).all(|a| p[a] > lo[a] + 1e-9 && p[a] < hi[a] - 1e-9))
     }
 
     /// Surface samples on a grid of `spacing` metres over every box face,
@@ -151,7 +152,8 @@ pub fn intrinsics() -> Intrinsics {
 pub fn render(objects: &[(u8, &BoxObject, Pose)]) -> SyntheticFrame {
     let k = intrinsics();
     let (w, h) = (k.width as usize, k.height as usize);
-    let mut f = SyntheticFrame { intrinsics: k, color: vec![0; w * h * 3], depth: vec![0; w * h], labels: vec![0; w * h] };
+    let mut f =
+        SyntheticFrame { intrinsics: k, color: vec![0; w * h * 3], depth: vec![0; w * h], labels: vec![0; w * h] };
     for v in 0..h {
         for u in 0..w {
             let p = v * w + u;

@@ -20,12 +20,7 @@ pub(crate) struct Canvas {
 
 impl Canvas {
     pub(crate) fn new(width: u32, height: u32, fill: Rgb) -> Self {
-        let rgb = fill
-            .iter()
-            .copied()
-            .cycle()
-            .take(width as usize * height as usize * 3)
-            .collect();
+        let rgb = fill.iter().copied().cycle().take(width as usize * height as usize * 3).collect();
         Canvas { width, height, rgb }
     }
 
@@ -61,13 +56,7 @@ impl Canvas {
     }
 
     /// A filled ellipse inside `rect`, centred at local `(cs, ct)` with local radii `(rs, rt)`.
-    pub(crate) fn ellipse(
-        &mut self,
-        rect: UvRect,
-        centre: (f64, f64),
-        radii: (f64, f64),
-        color: Rgb,
-    ) {
+    pub(crate) fn ellipse(&mut self, rect: UvRect, centre: (f64, f64), radii: (f64, f64), color: Rgb) {
         self.paint(rect, |s, t| {
             let (ds, dt) = ((s - centre.0) / radii.0, (t - centre.1) / radii.1);
             (ds * ds + dt * dt <= 1.0).then_some(color)
@@ -76,14 +65,7 @@ impl Canvas {
 
     /// Rows of text-like marks (short bars with word gaps) filling the local
     /// area `[s0, t0, s1, t1]` of `rect`, `rows` lines high.
-    pub(crate) fn text_marks(
-        &mut self,
-        rect: UvRect,
-        area: [f64; 4],
-        rows: usize,
-        color: Rgb,
-        rng: &mut Pcg64,
-    ) {
+    pub(crate) fn text_marks(&mut self, rect: UvRect, area: [f64; 4], rows: usize, color: Rgb, rng: &mut Pcg64) {
         let [s0, t0, s1, t1] = area;
         let line = (t1 - t0) / rows as f64;
         let mut bars: Vec<[f64; 4]> = Vec::new();
@@ -98,19 +80,11 @@ impl Canvas {
                 s = end + (s1 - s0) * 0.03;
             }
         }
-        self.paint(rect, |s, t| {
-            bars.iter()
-                .any(|b| s >= b[0] && s <= b[2] && t >= b[1] && t <= b[3])
-                .then_some(color)
-        });
+        self.paint(rect, |s, t| bars.iter().any(|b| s >= b[0] && s <= b[2] && t >= b[1] && t <= b[3]).then_some(color));
     }
 
     pub(crate) fn into_texture(self) -> Texture {
-        Texture {
-            width: self.width,
-            height: self.height,
-            rgb: self.rgb,
-        }
+        Texture { width: self.width, height: self.height, rgb: self.rgb }
     }
 }
 

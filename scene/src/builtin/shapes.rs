@@ -62,17 +62,9 @@ impl Assembly {
                 }
             }
         }
-        let mut part = Part {
-            positions: points.iter().map(|p| p32(*p)).collect(),
-            uvs,
-            triangles,
-            normals: Vec::new(),
-        };
-        let mesh = Mesh {
-            positions: part.positions.clone(),
-            triangles: part.triangles.clone(),
-            ..Default::default()
-        };
+        let mut part =
+            Part { positions: points.iter().map(|p| p32(*p)).collect(), uvs, triangles, normals: Vec::new() };
+        let mesh = Mesh { positions: part.positions.clone(), triangles: part.triangles.clone(), ..Default::default() };
         part.normals = compute_vertex_normals(&mesh);
         if wrap_cols {
             for i in 0..=rows {
@@ -102,10 +94,7 @@ impl Assembly {
         self.grid(1, 1, false, |i, j| {
             let (s, t) = (j as f64, i as f64);
             let p = centre + u_axis * (2.0 * s - 1.0) * half.0 + v_axis * (2.0 * t - 1.0) * half.1;
-            (
-                p,
-                [uv[0] + s * (uv[2] - uv[0]), uv[1] + t * (uv[3] - uv[1])],
-            )
+            (p, [uv[0] + s * (uv[2] - uv[0]), uv[1] + t * (uv[3] - uv[1])])
         });
     }
 
@@ -146,10 +135,7 @@ impl Assembly {
             let s = j as f64 / segments as f64;
             let a = TAU * s;
             let t = arc[i] / total;
-            (
-                Point3::new(rx * a.cos(), ry * a.sin(), z),
-                [uv[0] + s * (uv[2] - uv[0]), uv[1] + t * (uv[3] - uv[1])],
-            )
+            (Point3::new(rx * a.cos(), ry * a.sin(), z), [uv[0] + s * (uv[2] - uv[0]), uv[1] + t * (uv[3] - uv[1])])
         });
     }
 
@@ -169,13 +155,9 @@ impl Assembly {
             let phi = phi_range.0 + (phi_range.1 - phi_range.0) * i as f64 / along as f64;
             let psi = TAU * j as f64 / around as f64;
             let radial = Vector3::new(phi.cos(), 0.0, phi.sin());
-            let p =
-                centre + radial * major + (radial * psi.cos() + Vector3::y() * psi.sin()) * minor;
+            let p = centre + radial * major + (radial * psi.cos() + Vector3::y() * psi.sin()) * minor;
             let (s, t) = (j as f64 / around as f64, i as f64 / along as f64);
-            (
-                p,
-                [uv[0] + s * (uv[2] - uv[0]), uv[1] + t * (uv[3] - uv[1])],
-            )
+            (p, [uv[0] + s * (uv[2] - uv[0]), uv[1] + t * (uv[3] - uv[1])])
         });
     }
 
@@ -183,11 +165,7 @@ impl Assembly {
     pub(crate) fn append_shifted(&mut self, other: Assembly, offset: Vector3<f64>) {
         for mut part in other.parts {
             for p in &mut part.positions {
-                *p = [
-                    p[0] + offset.x as f32,
-                    p[1] + offset.y as f32,
-                    p[2] + offset.z as f32,
-                ];
+                *p = [p[0] + offset.x as f32, p[1] + offset.y as f32, p[2] + offset.z as f32];
             }
             self.parts.push(part);
         }
@@ -214,24 +192,14 @@ impl Assembly {
                 mesh.triangles.push(out);
             }
         }
-        let (lo, hi) = mesh
-            .positions
-            .iter()
-            .fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), p| {
-                (
-                    std::array::from_fn(|k| lo[k].min(p[k])),
-                    std::array::from_fn(|k| hi[k].max(p[k])),
-                )
-            });
+        let (lo, hi) = mesh.positions.iter().fold(([f32::MAX; 3], [f32::MIN; 3]), |(lo, hi), p| {
+            (std::array::from_fn(|k| lo[k].min(p[k])), std::array::from_fn(|k| hi[k].max(p[k])))
+        });
         let centre: [f32; 3] = std::array::from_fn(|k| (lo[k] + hi[k]) / 2.0);
         for p in &mut mesh.positions {
             *p = std::array::from_fn(|k| p[k] - centre[k]);
         }
-        mesh.materials = vec![Material {
-            name: material_name.into(),
-            diffuse,
-            texture: Some(texture),
-        }];
+        mesh.materials = vec![Material { name: material_name.into(), diffuse, texture: Some(texture) }];
         mesh
     }
 }

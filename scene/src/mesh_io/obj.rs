@@ -72,31 +72,21 @@ fn is_line_error(e: &tobj::LoadError) -> bool {
 }
 
 pub(super) fn load_obj(path: &Path) -> Result<Mesh, MeshError> {
-    let file = File::open(path).map_err(|error| MeshError::Io {
-        path: path.to_owned(),
-        error,
-    })?;
-    let mut reader = LineCounter {
-        inner: BufReader::new(file),
-        newlines: 0,
-        last_byte: None,
-    };
+    let file = File::open(path).map_err(|error| MeshError::Io { path: path.to_owned(), error })?;
+    let mut reader = LineCounter { inner: BufReader::new(file), newlines: 0, last_byte: None };
     let dir = path.parent().map(Path::to_owned).unwrap_or_default();
     // Triangulated, one index per vertex, points and lines dropped.
     let options = tobj::GPU_LOAD_OPTIONS;
     let (models, materials) =
-        tobj::load_obj_buf(&mut reader, &options, |mtl| tobj::load_mtl(dir.join(mtl))).map_err(
-            |e| MeshError::Parse {
+        tobj::load_obj_buf(&mut reader, &options, |mtl| tobj::load_mtl(dir.join(mtl))).map_err(|e| {
+            MeshError::Parse {
                 path: path.to_owned(),
                 line: is_line_error(&e).then(|| reader.current_line()),
                 message: format!("OBJ {e}"),
-            },
-        )?;
+            }
+        })?;
     let tobj_materials = materials.unwrap_or_else(|e| {
-        tracing::warn!(
-            "{}: material library unusable ({e}); using plain grey",
-            path.display()
-        );
+        tracing::warn!("{}: material library unusable ({e}); using plain grey", path.display());
         Vec::new()
     });
     let mut materials = convert_materials(path, &dir, &tobj_materials);
@@ -109,28 +99,20 @@ fn convert_materials(obj: &Path, dir: &Path, mats: &[tobj::Material]) -> Vec<Mat
     let out = mats
         .iter()
         .map(|m| {
-            let texture = m
-                .diffuse_texture
-                .as_deref()
-                .filter(|t| !t.trim().is_empty())
-                .and_then(|name| {
-                    let file = texture_path(dir, name);
-                    cache
-                        .entry(file.clone())
-                        .or_insert_with(|| match read_texture(&file) {
-                            Ok(t) => Some(t),
-                            Err(e) => {
-                                missing.push(format!("{} ({e})", file.display()));
-                                None
-                            }
-                        })
-                        .clone()
-                });
-            Material {
-                name: m.name.clone(),
-                diffuse: m.diffuse.unwrap_or(DEFAULT_DIFFUSE),
-                texture,
-            }
+            let texture = m.diffuse_texture.as_deref().filter(|t| !t.trim().is_empty()).and_then(|name| {
+                let file = texture_path(dir, name);
+                cache
+                    .entry(file.clone())
+                    .or_insert_with(|| match read_texture(&file) {
+                        Ok(t) => Some(t),
+                        Err(e) => {
+                            missing.push(format!("{} ({e})", file.display()));
+                            None
+                        }
+                    })
+                    .clone()
+            });
+            Material { name: m.name.clone(), diffuse: m.diffuse.unwrap_or(DEFAULT_DIFFUSE), texture }
         })
         .collect();
     if !missing.is_empty() {
@@ -150,19 +132,12 @@ fn texture_path(dir: &Path, name: &str) -> PathBuf {
     if whole.exists() {
         return whole;
     }
-    name.split_whitespace()
-        .last()
-        .map(|w| dir.join(w))
-        .unwrap_or(whole)
+    name.split_whitespace().last().map(|w| dir.join(w)).unwrap_or(whole)
 }
 
 /// Merges `tobj` models into one mesh; attributes present in only some models
 /// are dropped (normals, colours) or zero-filled (UVs).
-fn assemble(
-    path: &Path,
-    models: &[tobj::Model],
-    materials: &mut Vec<Material>,
-) -> Result<Mesh, MeshError> {
+fn assemble(path: &Path, models: &[tobj::Model], materials: &mut Vec<Material>) -> Result<Mesh, MeshError> {
     let mut mesh = Mesh::default();
     let all_normals = models.iter().all(|m| !m.mesh.normals.is_empty());
     let all_colors = models.iter().all(|m| !m.mesh.vertex_color.is_empty());
@@ -175,30 +150,21 @@ fn assemble(
         let bad = |what: &str| MeshError::Parse {
             path: path.to_owned(),
             line: None,
-            message: format!(
-                "object '{}' has {what} not matching its {n} positions",
-                model.name
-            ),
+            message: format!("object '{}' has {what} not matching its {n} positions", model.name),
         };
-        mesh.positions
-            .extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+        mesh.positions.extend(m.positions.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
         if all_normals {
             if m.normals.len() != 3 * n {
                 return Err(bad("normals"));
             }
-            mesh.normals
-                .extend(m.normals.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
+            mesh.normals.extend(m.normals.chunks_exact(3).map(|c| [c[0], c[1], c[2]]));
         }
         if all_colors {
             if m.vertex_color.len() != 3 * n {
                 return Err(bad("vertex colours"));
             }
             let to_u8 = |x: f32| (x.clamp(0.0, 1.0) * 255.0).round() as u8;
-            mesh.colors.extend(
-                m.vertex_color
-                    .chunks_exact(3)
-                    .map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2])]),
-            );
+            mesh.colors.extend(m.vertex_color.chunks_exact(3).map(|c| [to_u8(c[0]), to_u8(c[1]), to_u8(c[2])]));
         }
         if any_uvs {
             if m.texcoords.is_empty() {
@@ -206,18 +172,13 @@ fn assemble(
             } else if m.texcoords.len() != 2 * n {
                 return Err(bad("texture coordinates"));
             } else {
-                mesh.uvs
-                    .extend(m.texcoords.chunks_exact(2).map(|c| [c[0], c[1]]));
+                mesh.uvs.extend(m.texcoords.chunks_exact(2).map(|c| [c[0], c[1]]));
             }
         }
         let material = match m.material_id.filter(|&i| i < materials.len()) {
             Some(i) => i as u32,
             None => *default_material.get_or_insert_with(|| {
-                materials.push(Material {
-                    name: "default".into(),
-                    diffuse: DEFAULT_DIFFUSE,
-                    texture: None,
-                });
+                materials.push(Material { name: "default".into(), diffuse: DEFAULT_DIFFUSE, texture: None });
                 materials.len() as u32 - 1
             }),
         };
@@ -227,11 +188,7 @@ fn assemble(
         }
     }
     if materials.is_empty() {
-        materials.push(Material {
-            name: "default".into(),
-            diffuse: DEFAULT_DIFFUSE,
-            texture: None,
-        });
+        materials.push(Material { name: "default".into(), diffuse: DEFAULT_DIFFUSE, texture: None });
     }
     mesh.materials = std::mem::take(materials);
     Ok(mesh)

@@ -44,19 +44,13 @@ fn index_list(p: &Property) -> Option<Vec<i64>> {
 /// A colour channel as 0..255: integers as they are, floats scaled from 0..1.
 fn channel(p: &Property) -> Option<u8> {
     match p {
-        Property::Float(_) | Property::Double(_) => {
-            scalar(p).map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8)
-        }
+        Property::Float(_) | Property::Double(_) => scalar(p).map(|v| (v.clamp(0.0, 1.0) * 255.0).round() as u8),
         _ => scalar(p).map(|v| v.clamp(0.0, 255.0) as u8),
     }
 }
 
 /// The first of `names` the element has, read with `read`.
-fn first_of<T>(
-    e: &DefaultElement,
-    names: &[&str],
-    read: impl Fn(&Property) -> Option<T>,
-) -> Option<T> {
+fn first_of<T>(e: &DefaultElement, names: &[&str], read: impl Fn(&Property) -> Option<T>) -> Option<T> {
     names.iter().find_map(|n| e.get(*n)).and_then(read)
 }
 
@@ -75,43 +69,21 @@ fn split_line(message: &str) -> (Option<usize>, String) {
 }
 
 pub(super) fn load_ply(path: &Path) -> Result<Mesh, MeshError> {
-    let file = File::open(path).map_err(|error| MeshError::Io {
-        path: path.to_owned(),
-        error,
+    let file = File::open(path).map_err(|error| MeshError::Io { path: path.to_owned(), error })?;
+    let ply = Parser::<DefaultElement>::new().read_ply(&mut BufReader::new(file)).map_err(|e| {
+        let (line, message) = split_line(&e.to_string());
+        MeshError::Parse { path: path.to_owned(), line, message: format!("PLY {message}") }
     })?;
-    let ply = Parser::<DefaultElement>::new()
-        .read_ply(&mut BufReader::new(file))
-        .map_err(|e| {
-            let (line, message) = split_line(&e.to_string());
-            MeshError::Parse {
-                path: path.to_owned(),
-                line,
-                message: format!("PLY {message}"),
-            }
-        })?;
-    let parse_err = |message: String| MeshError::Parse {
-        path: path.to_owned(),
-        line: None,
-        message,
-    };
+    let parse_err = |message: String| MeshError::Parse { path: path.to_owned(), line: None, message };
 
-    let vertices = ply
-        .payload
-        .get("vertex")
-        .ok_or_else(|| parse_err("no 'vertex' element".into()))?;
+    let vertices = ply.payload.get("vertex").ok_or_else(|| parse_err("no 'vertex' element".into()))?;
     let mut mesh = Mesh::default();
     for (i, v) in vertices.iter().enumerate() {
         let coord = |name: &str| {
-            first_of(v, &[name], scalar)
-                .ok_or_else(|| parse_err(format!("vertex {i} has no numeric '{name}'")))
+            first_of(v, &[name], scalar).ok_or_else(|| parse_err(format!("vertex {i} has no numeric '{name}'")))
         };
-        mesh.positions
-            .push([coord("x")? as f32, coord("y")? as f32, coord("z")? as f32]);
-        let normal = [
-            first_of(v, &["nx"], scalar),
-            first_of(v, &["ny"], scalar),
-            first_of(v, &["nz"], scalar),
-        ];
+        mesh.positions.push([coord("x")? as f32, coord("y")? as f32, coord("z")? as f32]);
+        let normal = [first_of(v, &["nx"], scalar), first_of(v, &["ny"], scalar), first_of(v, &["nz"], scalar)];
         if let [Some(x), Some(y), Some(z)] = normal {
             mesh.normals.push([x as f32, y as f32, z as f32]);
         }
@@ -132,21 +104,15 @@ pub(super) fn load_ply(path: &Path) -> Result<Mesh, MeshError> {
         }
     }
     let n = mesh.positions.len();
-    for (attr, len) in [
-        ("normals", mesh.normals.len()),
-        ("colours", mesh.colors.len()),
-        ("texture coordinates", mesh.uvs.len()),
-    ] {
+    for (attr, len) in
+        [("normals", mesh.normals.len()), ("colours", mesh.colors.len()), ("texture coordinates", mesh.uvs.len())]
+    {
         if len != 0 && len != n {
             return Err(parse_err(format!("only {len} of {n} vertices have {attr}")));
         }
     }
 
-    let faces = ply
-        .payload
-        .get("face")
-        .map(Vec::as_slice)
-        .unwrap_or_default();
+    let faces = ply.payload.get("face").map(Vec::as_slice).unwrap_or_default();
     for (f, face) in faces.iter().enumerate() {
         let indices = first_of(face, &["vertex_indices", "vertex_index"], index_list)
             .ok_or_else(|| parse_err(format!("face {f} has no integer list 'vertex_indices'")))?;
@@ -154,11 +120,7 @@ pub(super) fn load_ply(path: &Path) -> Result<Mesh, MeshError> {
             u32::try_from(i)
                 .ok()
                 .filter(|&i| (i as usize) < n)
-                .ok_or_else(|| {
-                    parse_err(format!(
-                        "face {f} refers to vertex {i}, but there are {n} vertices"
-                    ))
-                })
+                .ok_or_else(|| parse_err(format!("face {f} refers to vertex {i}, but there are {n} vertices")))
         };
         if indices.len() < 3 {
             continue; // points and lines carry no surface
@@ -189,10 +151,6 @@ pub(super) fn load_ply(path: &Path) -> Result<Mesh, MeshError> {
                 }
             }
         });
-    mesh.materials.push(Material {
-        name: "default".into(),
-        diffuse: DEFAULT_DIFFUSE,
-        texture,
-    });
+    mesh.materials.push(Material { name: "default".into(), diffuse: DEFAULT_DIFFUSE, texture });
     Ok(mesh)
 }

@@ -72,35 +72,20 @@ fn obj_with_materials_texture_normals_and_uvs_loads() {
     write(&dir, "cube.mtl", CUBE_MTL);
     let pixels = write_png(&dir, "body.png");
     let mesh = load_mesh(&obj, 1.0).unwrap();
-    assert_eq!(
-        mesh.triangles.len(),
-        12,
-        "6 quads triangulate to 12 triangles"
-    );
+    assert_eq!(mesh.triangles.len(), 12, "6 quads triangulate to 12 triangles");
     assert_eq!(mesh.uvs.len(), mesh.positions.len());
     assert_eq!(mesh.normals.len(), mesh.positions.len());
     assert_eq!(mesh.materials.len(), 2);
-    let body = mesh
-        .materials
-        .iter()
-        .position(|m| m.name == "body")
-        .unwrap();
+    let body = mesh.materials.iter().position(|m| m.name == "body").unwrap();
     let lid = mesh.materials.iter().position(|m| m.name == "lid").unwrap();
-    let texture = mesh.materials[body]
-        .texture
-        .as_ref()
-        .expect("body texture loaded");
+    let texture = mesh.materials[body].texture.as_ref().expect("body texture loaded");
     assert_eq!((texture.width, texture.height), (2, 1));
     assert_eq!(texture.rgb, pixels);
     assert_eq!(mesh.materials[lid].diffuse, [0.1, 0.2, 0.9]);
     assert!(mesh.materials[lid].texture.is_none());
     // Exactly the two +z triangles use the lid material, and their vertices are at z = 0.5.
-    let lid_tris: Vec<_> = mesh
-        .triangles
-        .iter()
-        .zip(&mesh.triangle_materials)
-        .filter(|(_, m)| **m as usize == lid)
-        .collect();
+    let lid_tris: Vec<_> =
+        mesh.triangles.iter().zip(&mesh.triangle_materials).filter(|(_, m)| **m as usize == lid).collect();
     assert_eq!(lid_tris.len(), 2);
     for (t, _) in lid_tris {
         for &i in t {
@@ -118,15 +103,8 @@ fn obj_scale_converts_millimetres_to_metres() {
     assert!((mesh.positions[1][0] - 0.1).abs() < 1e-7 && (mesh.positions[2][1] - 0.2).abs() < 1e-7);
     // No normals in the file: computed, facing +z for a CCW triangle in the xy plane.
     assert_eq!(mesh.normals, vec![[0.0, 0.0, 1.0]; 3]);
-    assert_eq!(
-        mesh.materials.len(),
-        1,
-        "a default material is always present"
-    );
-    assert!(matches!(
-        load_mesh(&obj, 0.0),
-        Err(MeshError::BadScale { .. })
-    ));
+    assert_eq!(mesh.materials.len(), 1, "a default material is always present");
+    assert!(matches!(load_mesh(&obj, 0.0), Err(MeshError::BadScale { .. })));
 }
 
 #[test]
@@ -146,27 +124,16 @@ fn missing_mtl_file_still_loads_with_default_material() {
     let obj = write(&dir, "cube.obj", CUBE_OBJ); // cube.mtl absent
     let mesh = load_mesh(&obj, 1.0).unwrap();
     assert_eq!(mesh.triangles.len(), 12);
-    assert!(
-        mesh.triangle_materials
-            .iter()
-            .all(|&m| (m as usize) < mesh.materials.len())
-    );
+    assert!(mesh.triangle_materials.iter().all(|&m| (m as usize) < mesh.materials.len()));
 }
 
 #[test]
 fn malformed_obj_error_names_file_and_line() {
     let dir = temp_dir("obj-bad");
-    let obj = write(
-        &dir,
-        "broken.obj",
-        "# comment\nv 0 0 0\nv 1 0 zero\nv 0 1 0\nf 1 2 3\n",
-    );
+    let obj = write(&dir, "broken.obj", "# comment\nv 0 0 0\nv 1 0 zero\nv 0 1 0\nf 1 2 3\n");
     let err = load_mesh(&obj, 1.0).unwrap_err();
     let text = err.to_string();
-    assert!(
-        text.contains("broken.obj") && text.contains("line 3"),
-        "{text}"
-    );
+    assert!(text.contains("broken.obj") && text.contains("line 3"), "{text}");
     assert!(matches!(err, MeshError::Parse { line: Some(3), .. }));
 }
 
@@ -177,33 +144,17 @@ fn obj_face_index_out_of_range_is_an_error_not_a_panic() {
     let text = load_mesh(&obj, 1.0).unwrap_err().to_string();
     assert!(text.contains("oob.obj"), "{text}");
     let empty = write(&dir, "empty.obj", "# nothing\n");
-    assert!(
-        load_mesh(&empty, 1.0)
-            .unwrap_err()
-            .to_string()
-            .contains("empty.obj")
-    );
+    assert!(load_mesh(&empty, 1.0).unwrap_err().to_string().contains("empty.obj"));
 }
 
 #[test]
 fn unreadable_and_unsupported_files_name_the_file() {
     let dir = temp_dir("io");
     let missing = dir.join("nope.obj");
-    assert!(matches!(
-        load_mesh(&missing, 1.0),
-        Err(MeshError::Io { .. })
-    ));
-    assert!(
-        load_mesh(&missing, 1.0)
-            .unwrap_err()
-            .to_string()
-            .contains("nope.obj")
-    );
+    assert!(matches!(load_mesh(&missing, 1.0), Err(MeshError::Io { .. })));
+    assert!(load_mesh(&missing, 1.0).unwrap_err().to_string().contains("nope.obj"));
     let stl = write(&dir, "part.stl", "solid x\n");
-    assert!(matches!(
-        load_mesh(&stl, 1.0),
-        Err(MeshError::UnsupportedFormat { .. })
-    ));
+    assert!(matches!(load_mesh(&stl, 1.0), Err(MeshError::UnsupportedFormat { .. })));
 }
 
 const SQUARE_PLY_HEADER: &str = "\
@@ -233,11 +184,7 @@ fn ascii_ply_with_colours_uvs_and_quads_loads() {
     let ply = write(&dir, "square.ply", &text);
     let mesh = load_mesh(&ply, 1.0).unwrap();
     assert_eq!(mesh.positions.len(), 5);
-    assert_eq!(
-        mesh.triangles,
-        vec![[0, 1, 2], [0, 2, 3], [0, 1, 4]],
-        "quad is fan-triangulated"
-    );
+    assert_eq!(mesh.triangles, vec![[0, 1, 2], [0, 2, 3], [0, 1, 4]], "quad is fan-triangulated");
     assert_eq!(mesh.colors[0], [255, 0, 0]);
     assert_eq!(mesh.colors[3], [10, 20, 30]);
     assert_eq!(mesh.uvs[2], [1.0, 1.0]);
@@ -250,12 +197,7 @@ fn ascii_ply_with_colours_uvs_and_quads_loads() {
 fn binary_ply_bytes() -> Vec<u8> {
     let header = "ply\nformat binary_little_endian 1.0\nelement vertex 4\nproperty float x\nproperty float y\nproperty float z\nproperty float nx\nproperty float ny\nproperty float nz\nproperty uchar red\nproperty uchar green\nproperty uchar blue\nelement face 2\nproperty list uchar int vertex_indices\nend_header\n";
     let mut b = header.as_bytes().to_vec();
-    let verts = [
-        [0.0f32, 0.0, 0.0],
-        [2.0, 0.0, 0.0],
-        [2.0, 3.0, 0.0],
-        [0.0, 3.0, 0.0],
-    ];
+    let verts = [[0.0f32, 0.0, 0.0], [2.0, 0.0, 0.0], [2.0, 3.0, 0.0], [0.0, 3.0, 0.0]];
     for (i, v) in verts.iter().enumerate() {
         for c in v.iter().chain(&[0.0f32, 0.0, 1.0]) {
             b.extend_from_slice(&c.to_le_bytes());
@@ -279,15 +221,7 @@ fn binary_little_endian_ply_loads() {
     let path = dir.join("plate.ply");
     std::fs::write(&path, binary_ply_bytes()).unwrap();
     let mesh = load_mesh(&path, 0.5).unwrap();
-    assert_eq!(
-        mesh.positions,
-        vec![
-            [0.0, 0.0, 0.0],
-            [1.0, 0.0, 0.0],
-            [1.0, 1.5, 0.0],
-            [0.0, 1.5, 0.0]
-        ]
-    );
+    assert_eq!(mesh.positions, vec![[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [1.0, 1.5, 0.0], [0.0, 1.5, 0.0]]);
     assert_eq!(mesh.triangles, vec![[0, 1, 2], [0, 1, 2], [0, 2, 3]]);
     assert_eq!(mesh.colors[2], [120, 100, 200]);
     assert_eq!(mesh.normals[3], [0.0, 0.0, 1.0]);
@@ -313,38 +247,22 @@ fn malformed_ascii_ply_error_names_file_and_line() {
     let ply = write(&dir, "bad.ply", &text);
     let err = load_mesh(&ply, 1.0).unwrap_err();
     let text = err.to_string();
-    assert!(
-        text.contains("bad.ply") && text.contains("line 17"),
-        "{text}"
-    );
+    assert!(text.contains("bad.ply") && text.contains("line 17"), "{text}");
     // Face index past the vertex count.
     let oob = format!(
         "{SQUARE_PLY_HEADER}0 0 0 1 1 1 0 0\n1 0 0 1 1 1 0 0\n1 1 0 1 1 1 0 0\n0 1 0 1 1 1 0 0\n0 0 1 1 1 1 0 0\n3 0 1 2\n3 0 1 7\n"
     );
-    let text = load_mesh(&write(&dir, "oob.ply", &oob), 1.0)
-        .unwrap_err()
-        .to_string();
-    assert!(
-        text.contains("oob.ply") && text.contains("vertex 7"),
-        "{text}"
-    );
+    let text = load_mesh(&write(&dir, "oob.ply", &oob), 1.0).unwrap_err().to_string();
+    assert!(text.contains("oob.ply") && text.contains("vertex 7"), "{text}");
     let garbage = write(&dir, "garbage.ply", "this is not a ply file\n");
-    assert!(
-        load_mesh(&garbage, 1.0)
-            .unwrap_err()
-            .to_string()
-            .contains("garbage.ply")
-    );
+    assert!(load_mesh(&garbage, 1.0).unwrap_err().to_string().contains("garbage.ply"));
 }
 
 #[test]
 fn ply_texture_file_comment_loads_the_texture() {
     let dir = temp_dir("ply-texture");
     let pixels = write_png(&dir, "skin.png");
-    let text = SQUARE_PLY_HEADER.replace(
-        "comment a square",
-        "comment TextureFile skin.png\ncomment a square",
-    );
+    let text = SQUARE_PLY_HEADER.replace("comment a square", "comment TextureFile skin.png\ncomment a square");
     let ply = write(
         &dir,
         "tex.ply",
@@ -380,48 +298,25 @@ fn object_dir_loads_folders_and_files_sorted_with_declared_symmetry() {
     assert_eq!(set.objects[0].name, "zebra_cube");
     assert_eq!(
         set.objects[0].symmetry,
-        Symmetry::Continuous {
-            axis: nalgebra::Vector3::z(),
-            origin: nalgebra::Point3::new(0.0, 0.0, 0.125)
-        }
+        Symmetry::Continuous { axis: nalgebra::Vector3::z(), origin: nalgebra::Point3::new(0.0, 0.0, 0.125) }
     );
     write(&dir, "models_info.json", "{ not json");
-    assert!(
-        load_object_dir(&dir, 1.0)
-            .unwrap_err()
-            .to_string()
-            .contains("models_info.json")
-    );
+    assert!(load_object_dir(&dir, 1.0).unwrap_err().to_string().contains("models_info.json"));
     let empty = temp_dir("object-dir-empty");
-    assert!(matches!(
-        load_object_dir(&empty, 1.0),
-        Err(MeshError::NoMesh { .. })
-    ));
+    assert!(matches!(load_object_dir(&empty, 1.0), Err(MeshError::NoMesh { .. })));
 }
 
 /// Real meshes: the five YCB objects next to the repository (not part of it).
 #[test]
 fn loads_the_ycb_sample_meshes() {
-    let root = Path::new(concat!(
-        env!("CARGO_MANIFEST_DIR"),
-        "/../../shared/objects/ycb-sample"
-    ));
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../shared/objects/ycb-sample"));
     if !root.is_dir() {
         eprintln!("skipping: ../shared/objects/ycb-sample not found");
         return;
     }
     let set = load_object_dir(root, 1.0).unwrap();
     let names: Vec<_> = set.objects.iter().map(|o| o.name.as_str()).collect();
-    assert_eq!(
-        names,
-        [
-            "YcbBanana",
-            "YcbFoamBrick",
-            "YcbMasterChefCan",
-            "YcbPowerDrill",
-            "YcbScissors"
-        ]
-    );
+    assert_eq!(names, ["YcbBanana", "YcbFoamBrick", "YcbMasterChefCan", "YcbPowerDrill", "YcbScissors"]);
     for o in &set.objects {
         let m = &o.mesh;
         let textured = m.materials.iter().any(|mat| mat.texture.is_some());
@@ -437,26 +332,12 @@ fn loads_the_ycb_sample_meshes() {
             extent.y * 1e3,
             extent.z * 1e3
         );
-        assert_eq!(
-            textured,
-            o.name == "YcbBanana" || o.name == "YcbScissors",
-            "{}",
-            o.name
-        );
+        assert_eq!(textured, o.name == "YcbBanana" || o.name == "YcbScissors", "{}", o.name);
         assert!(!m.triangles.is_empty() && m.uvs.len() == m.positions.len());
         // Household objects: between 5 cm and 40 cm across, in metres.
-        assert!(
-            (0.05..0.4).contains(&o.diameter),
-            "{} diameter {}",
-            o.name,
-            o.diameter
-        );
+        assert!((0.05..0.4).contains(&o.diameter), "{} diameter {}", o.name, o.diameter);
     }
     // The master chef can is ~102 mm across and ~140 mm tall: diameter ~0.17 m.
     let can = &set.objects[2];
-    assert!(
-        (can.diameter - 0.172).abs() < 0.015,
-        "can diameter {}",
-        can.diameter
-    );
+    assert!((can.diameter - 0.172).abs() < 0.015, "can diameter {}", can.diameter);
 }

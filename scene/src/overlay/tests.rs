@@ -8,14 +8,7 @@ use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
 /// Off-centre principal point and fx != fy, so swapped or dropped terms show.
 fn k_small() -> Intrinsics {
-    Intrinsics {
-        fx: 500.0,
-        fy: 530.0,
-        cx: 151.3,
-        cy: 127.6,
-        width: 320,
-        height: 240,
-    }
+    Intrinsics { fx: 500.0, fy: 530.0, cx: 151.3, cy: 127.6, width: 320, height: 240 }
 }
 
 fn pose(axis_angle: [f64; 3], t: [f64; 3]) -> Pose {
@@ -27,10 +20,7 @@ fn pose(axis_angle: [f64; 3], t: [f64; 3]) -> Pose {
 
 /// u = fx x / z + cx, v = fy y / z + cy, rounded to the nearest pixel.
 fn pixel_of(k: &Intrinsics, p: [f64; 3]) -> (u32, u32) {
-    (
-        (k.fx * p[0] / p[2] + k.cx).round() as u32,
-        (k.fy * p[1] / p[2] + k.cy).round() as u32,
-    )
+    ((k.fx * p[0] / p[2] + k.cx).round() as u32, (k.fy * p[1] / p[2] + k.cy).round() as u32)
 }
 
 fn coloured_pixels(img: &RgbImage) -> usize {
@@ -46,33 +36,18 @@ fn axes_start_at_the_projected_translation_and_follow_the_rotation() {
     // Rotation of -90 deg about camera z: object x -> camera -y (up in the image),
     // object y -> camera +x (right).
     let o = OverlayObject::new(model, 1, pose([0.0, 0.0, -std::f64::consts::FRAC_PI_2], t));
-    let style = OverlayStyle {
-        axis_fraction: 0.5,
-        silhouette: false,
-        bounding_box: false,
-        thickness: 1,
-    };
+    let style = OverlayStyle { axis_fraction: 0.5, silhouette: false, bounding_box: false, thickness: 1 };
     let mut img = RgbImage::new(k.width, k.height);
     draw_poses(&mut img, &k, &[o], &style);
 
     let len = 0.5 * model.diameter;
     let origin = pixel_of(&k, t);
     // z is drawn last and starts at the origin.
-    assert_eq!(
-        img.get_pixel(origin.0, origin.1).0,
-        AXIS_COLOURS[2],
-        "axis origin is not at the projected translation"
-    );
+    assert_eq!(img.get_pixel(origin.0, origin.1).0, AXIS_COLOURS[2], "axis origin is not at the projected translation");
     let x_tip = pixel_of(&k, [t[0], t[1] - len, t[2]]);
     let y_tip = pixel_of(&k, [t[0] + len, t[1], t[2]]);
-    assert!(
-        x_tip.1 + 20 < origin.1,
-        "x axis should point up in the image"
-    );
-    assert!(
-        y_tip.0 > origin.0 + 20,
-        "y axis should point right in the image"
-    );
+    assert!(x_tip.1 + 20 < origin.1, "x axis should point up in the image");
+    assert!(y_tip.0 > origin.0 + 20, "y axis should point right in the image");
     assert_eq!(img.get_pixel(x_tip.0, x_tip.1).0, AXIS_COLOURS[0]);
     assert_eq!(img.get_pixel(y_tip.0, y_tip.1).0, AXIS_COLOURS[1]);
     // Nothing beyond the tips.
@@ -91,18 +66,9 @@ fn silhouette_mask_matches_the_rendered_label_map() {
         let model = set.by_class(class_id).unwrap();
         let p = pose([0.4, -0.7, 0.3], [-0.02, 0.01, 0.65]);
         let mut target = RenderTarget::for_intrinsics(&k);
-        let item = RenderItem {
-            mesh: &model.mesh,
-            pose: p,
-            instance_label: 1,
-        };
+        let item = RenderItem { mesh: &model.mesh, pose: p, instance_label: 1 };
         render_scene(&[item], &k, &RenderSettings::default(), &mut target).unwrap();
-        let mask = silhouette_mask(
-            &k,
-            &OverlayObject::new(model, class_id, p),
-            k.width,
-            k.height,
-        );
+        let mask = silhouette_mask(&k, &OverlayObject::new(model, class_id, p), k.width, k.height);
         let (mut inter, mut union) = (0usize, 0usize);
         for (m, &l) in mask.iter().zip(target.labels()) {
             inter += (*m && l == 1) as usize;
@@ -110,10 +76,7 @@ fn silhouette_mask_matches_the_rendered_label_map() {
         }
         assert!(union > 500, "object too small to judge: {union} px");
         let iou = inter as f64 / union as f64;
-        assert!(
-            iou > 0.97,
-            "class {class_id}: silhouette IoU with the render is {iou:.3}"
-        );
+        assert!(iou > 0.97, "class {class_id}: silhouette IoU with the render is {iou:.3}");
     }
 }
 
@@ -151,29 +114,13 @@ fn bounding_box_corners_land_on_their_projections() {
     draw_bounding_box(&mut img, &k, &o, 1);
     for i in 0..8 {
         let c = Point3::new(
-            if i & 1 == 0 {
-                model.bbox_min.x
-            } else {
-                model.bbox_max.x
-            },
-            if i & 2 == 0 {
-                model.bbox_min.y
-            } else {
-                model.bbox_max.y
-            },
-            if i & 4 == 0 {
-                model.bbox_min.z
-            } else {
-                model.bbox_max.z
-            },
+            if i & 1 == 0 { model.bbox_min.x } else { model.bbox_max.x },
+            if i & 2 == 0 { model.bbox_min.y } else { model.bbox_max.y },
+            if i & 4 == 0 { model.bbox_min.z } else { model.bbox_max.z },
         );
         let c = p * c;
         let (u, v) = pixel_of(&k, [c.x, c.y, c.z]);
-        assert_eq!(
-            img.get_pixel(u, v).0,
-            [255, 255, 0],
-            "corner {i} at ({u}, {v})"
-        );
+        assert_eq!(img.get_pixel(u, v).0, [255, 255, 0], "corner {i} at ({u}, {v})");
     }
     // 12 edges only: the box's projected centre is not painted.
     let centre = p * nalgebra::center(&model.bbox_min, &model.bbox_max);
@@ -191,14 +138,8 @@ fn label_tint_blends_labelled_pixels_only() {
     let want = c.map(|c| (0.75 * 100.0 + 0.25 * c as f32).round() as u8);
     assert_eq!(img.get_pixel(1, 0).0, want);
     assert_ne!(img.get_pixel(3, 1).0, [100, 100, 100]);
-    assert!(matches!(
-        tint_labels(&mut img, &labels[1..], 0.5),
-        Err(OverlayError::PlaneSize { .. })
-    ));
-    assert!(matches!(
-        rgb_image(4, 2, &[0; 23]),
-        Err(OverlayError::PlaneSize { .. })
-    ));
+    assert!(matches!(tint_labels(&mut img, &labels[1..], 0.5), Err(OverlayError::PlaneSize { .. })));
+    assert!(matches!(rgb_image(4, 2, &[0; 23]), Err(OverlayError::PlaneSize { .. })));
 }
 
 #[test]
@@ -207,10 +148,7 @@ fn poses_behind_the_camera_or_not_finite_draw_nothing() {
     let k = k_small();
     let model = set.by_class(3).unwrap();
     let mut img = RgbImage::new(k.width, k.height);
-    let style = OverlayStyle {
-        bounding_box: true,
-        ..OverlayStyle::default()
-    };
+    let style = OverlayStyle { bounding_box: true, ..OverlayStyle::default() };
     let behind = OverlayObject::new(model, 3, pose([0.0; 3], [0.0, 0.0, -0.5]));
     let nan = OverlayObject::new(model, 3, pose([0.0; 3], [f64::NAN, 0.0, 0.5]));
     let far_off = OverlayObject::new(model, 3, pose([0.0; 3], [1e9, -1e9, 0.5]));
@@ -224,13 +162,9 @@ fn legend_and_png_round_trip() {
     draw_legend(&mut img, &[2, 5]);
     let s = LEGEND_SWATCH_PX;
     assert_eq!(img.get_pixel(4 + s / 2, 4 + s / 2).0, label_colour(2));
-    assert_eq!(
-        img.get_pixel(4 + s / 2, 4 + s + 4 + s / 2).0,
-        label_colour(5)
-    );
+    assert_eq!(img.get_pixel(4 + s / 2, 4 + s + 4 + s / 2).0, label_colour(5));
     assert_eq!(img.get_pixel(4, 4).0, [255, 255, 255]);
-    let path =
-        std::env::temp_dir().join(format!("fusepose_overlay_test_{}.png", std::process::id()));
+    let path = std::env::temp_dir().join(format!("fusepose_overlay_test_{}.png", std::process::id()));
     save_png(&img, &path).unwrap();
     let back = image::open(&path).unwrap().to_rgb8();
     std::fs::remove_file(&path).ok();

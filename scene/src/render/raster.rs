@@ -285,13 +285,8 @@ fn rasterise_item<'a>(
         } else {
             [0.0, 0.0, 1.0 / v0.p[2].max(settings.z_near)]
         };
-        let ctx = TriContext {
-            w_plane,
-            item: idx as u32,
-            tag,
-            texture,
-            normal: [nf[0] as f32, nf[1] as f32, nf[2] as f32],
-        };
+        let ctx =
+            TriContext { w_plane, item: idx as u32, tag, texture, normal: [nf[0] as f32, nf[1] as f32, nf[2] as f32] };
         if or == 0 {
             let sv = clip.map(|c| project(&frame.k, &c));
             alone += rasterise_triangle(frame, sv, &ctx);

@@ -157,7 +157,10 @@ fn sample(dec: &[f32; 256], tex: &Texture, u: f32, v: f32, filter: TextureFilter
             let (w00, w10) = ((1.0 - tx) * (1.0 - ty), tx * (1.0 - ty));
             let (w01, w11) = ((1.0 - tx) * ty, tx * ty);
             let mix = |c: usize| {
-                dec[t00[c] as usize] * w00 + dec[t10[c] as usize] * w10 + dec[t01[c] as usize] * w01 + dec[t11[c] as usize] * w11
+                dec[t00[c] as usize] * w00
+                    + dec[t10[c] as usize] * w10
+                    + dec[t01[c] as usize] * w01
+                    + dec[t11[c] as usize] * w11
             };
             [mix(0), mix(1), mix(2)]
         }
@@ -209,7 +212,6 @@ pub(super) fn resolve(
             o[0] = linear_to_srgb(enc, lin[0]);
             o[1] = linear_to_srgb(enc, lin[1]);
             o[2] = linear_to_srgb(enc, lin[2]);
-
         }
     }
 }

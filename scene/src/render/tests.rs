@@ -54,7 +54,11 @@ fn tilted_plane_depth_matches_analytic_depth_within_one_u16_unit() {
             if t.depth_m()[i] > 0.0 {
                 covered += 1;
                 let expect = depth_to_u16(z) as i32;
-                assert!((t.depth_u16()[i] as i32 - expect).abs() <= 1, "pixel ({u},{v}): {} vs {expect}", t.depth_u16()[i]);
+                assert!(
+                    (t.depth_u16()[i] as i32 - expect).abs() <= 1,
+                    "pixel ({u},{v}): {} vs {expect}",
+                    t.depth_u16()[i]
+                );
                 assert!((t.depth_m()[i] as f64 - z).abs() < 2e-5);
                 assert_eq!(t.labels()[i], 3);
             } else if inside {
@@ -211,7 +215,10 @@ fn bad_input_is_an_error_not_a_panic() {
     let mut t = RenderTarget::new(10, 10);
     let mesh = box_mesh([0.1; 3], 1.0, grey());
     let item = RenderItem { mesh: &mesh, pose: pose([0.0; 3], [0.0, 0.0, 1.0]), instance_label: 1 };
-    assert!(matches!(render_scene(&[item], &k, &RenderSettings::default(), &mut t), Err(RenderError::SizeMismatch { .. })));
+    assert!(matches!(
+        render_scene(&[item], &k, &RenderSettings::default(), &mut t),
+        Err(RenderError::SizeMismatch { .. })
+    ));
     let mut t = RenderTarget::for_intrinsics(&k);
     let mut bad = mesh.clone();
     bad.triangles.push([0, 1, 999]);
@@ -222,7 +229,10 @@ fn bad_input_is_an_error_not_a_panic() {
     assert!(render_scene(&[RenderItem { mesh: &bad, ..item }], &k, &RenderSettings::default(), &mut t).is_err());
     let mut nan_pose = item;
     nan_pose.pose.translation.vector.x = f64::NAN;
-    assert_eq!(render_scene(&[nan_pose], &k, &RenderSettings::default(), &mut t), Err(RenderError::BadPose { item: 0 }));
+    assert_eq!(
+        render_scene(&[nan_pose], &k, &RenderSettings::default(), &mut t),
+        Err(RenderError::BadPose { item: 0 })
+    );
     let settings = RenderSettings { z_near: 0.0, ..Default::default() };
     assert!(matches!(render_scene(&[item], &k, &settings, &mut t), Err(RenderError::BadZNear(_))));
     // Non-finite vertices are skipped, not drawn.

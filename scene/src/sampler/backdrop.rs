@@ -133,7 +133,8 @@ pub fn procedural_texture(rng: &mut impl Rng, pattern: Pattern, size: u32) -> Te
             };
             let i = (y * n + x) * 3;
             for c in 0..3 {
-                let col = if t < 0.0 { accent[c] * 0.6 } else { base[c] * (1.0 - contrast) + accent[c] * contrast * t * 2.0 };
+                let col =
+                    if t < 0.0 { accent[c] * 0.6 } else { base[c] * (1.0 - contrast) + accent[c] * contrast * t * 2.0 };
                 rgb[i + c] = col.round().clamp(0.0, 255.0) as u8;
             }
         }

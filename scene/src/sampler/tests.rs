@@ -78,7 +78,12 @@ fn objects_rest_on_the_table_without_interpenetrating() {
         for (i, o) in s.objects.iter().enumerate() {
             assert_eq!(o.instance_label as usize, i + 1);
             let m = set.by_class(o.class_id).unwrap();
-            let zs: Vec<f64> = m.mesh.positions.iter().map(|p| (o.table_from_object * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).z).collect();
+            let zs: Vec<f64> = m
+                .mesh
+                .positions
+                .iter()
+                .map(|p| (o.table_from_object * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64)).z)
+                .collect();
             let min_z = zs.iter().cloned().fold(f64::INFINITY, f64::min);
             assert!(min_z.abs() < 1e-6, "object {i} floats or sinks: lowest point at {min_z} m");
             // Resting on a face: at least 4 vertices touch the table.
@@ -124,8 +129,9 @@ fn cameras_respect_distance_and_elevation_ranges() {
             let eye = v.camera_from_table.inverse() * Point3::origin();
             assert!(eye.z > 0.1, "camera below or at the table: {eye}");
             // The optical axis passes near the objects' centroid.
-            let centroid = s.objects.iter().map(|o| o.table_from_object.translation.vector).sum::<nalgebra::Vector3<f64>>()
-                / s.objects.len() as f64;
+            let centroid =
+                s.objects.iter().map(|o| o.table_from_object.translation.vector).sum::<nalgebra::Vector3<f64>>()
+                    / s.objects.len() as f64;
             let c = v.camera_from_table * Point3::new(centroid.x, centroid.y, 0.05);
             assert!(c.z > 0.4 && c.z < 1.6, "look-at distance {}", c.z);
             assert!(c.x.abs() < 0.1 && c.y.abs() < 0.1, "look-at point off axis: {c}");
@@ -211,8 +217,11 @@ fn occlusion_targeting_finds_partly_hidden_objects() {
                 .objects
                 .iter()
                 .any(|o| o.alone_pixels > 300 && (0.25..=0.75).contains(&(1.0 - o.visible_fraction)));
-            assert!(ok, "seed {seed} view {vi}: no object 30–70 % hidden: {:?}",
-                truth.objects.iter().map(|o| 1.0 - o.visible_fraction).collect::<Vec<_>>());
+            assert!(
+                ok,
+                "seed {seed} view {vi}: no object 30–70 % hidden: {:?}",
+                truth.objects.iter().map(|o| 1.0 - o.visible_fraction).collect::<Vec<_>>()
+            );
         }
     }
     assert!(met * 4 >= total * 3, "target met in only {met} of {total} views");
@@ -228,7 +237,10 @@ fn bad_configs_and_sets_are_errors() {
     assert!(bad(SamplerConfig { camera_distance_m: (0.0, 1.0), ..Default::default() }));
     assert!(bad(SamplerConfig { views: 0, ..Default::default() }));
     assert!(bad(SamplerConfig { target_occlusion: Some((0.8, 0.2)), ..Default::default() }));
-    assert_eq!(sample_scene(&ObjectSet::default(), &SamplerConfig::default(), 1).unwrap_err(), SamplerError::EmptyObjectSet);
+    assert_eq!(
+        sample_scene(&ObjectSet::default(), &SamplerConfig::default(), 1).unwrap_err(),
+        SamplerError::EmptyObjectSet
+    );
     // Far more objects than fit on the table: a placement error, not a hang.
     let crowd = SamplerConfig { min_objects: 120, max_objects: 120, allow_duplicates: true, ..Default::default() };
     assert!(matches!(sample_scene(&set, &crowd, 1), Err(SamplerError::Placement { .. })));
@@ -237,7 +249,10 @@ fn bad_configs_and_sets_are_errors() {
     let mut t = RenderTarget::for_intrinsics(&k);
     assert!(matches!(render_view(&s, &set, 5, &k, &NoiseConfig::off(), &mut t), Err(SamplerError::NoSuchView { .. })));
     let small = ObjectSet { objects: set.objects[..1].to_vec() };
-    assert!(matches!(render_view(&s, &small, 0, &k, &NoiseConfig::off(), &mut t), Err(SamplerError::UnknownClass { .. })));
+    assert!(matches!(
+        render_view(&s, &small, 0, &k, &NoiseConfig::off(), &mut t),
+        Err(SamplerError::UnknownClass { .. })
+    ));
 }
 
 #[test]

@@ -16,7 +16,8 @@ pub fn look_at(eye: Point3<f64>, target: Point3<f64>, roll: f64) -> Option<Pose>
     let y = f.cross(&x);
     let table_from_cam_rot = Rotation3::from_matrix_unchecked(Matrix3::from_columns(&[x, y, f]));
     let rolled = table_from_cam_rot * Rotation3::from_axis_angle(&Vector3::z_axis(), roll);
-    let table_from_cam = Pose::from_parts(Translation3::from(eye.coords), UnitQuaternion::from_rotation_matrix(&rolled));
+    let table_from_cam =
+        Pose::from_parts(Translation3::from(eye.coords), UnitQuaternion::from_rotation_matrix(&rolled));
     Some(table_from_cam.inverse())
 }
 

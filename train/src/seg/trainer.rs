@@ -174,7 +174,10 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     let (mut net, arch, mut record) = match &cfg.resume {
         Some(path) => {
             let loaded = store::load(path, &device)?;
-            loaded.file.check_objects(&set).with_context(|| format!("{} does not fit the object set", path.display()))?;
+            loaded
+                .file
+                .check_objects(&set)
+                .with_context(|| format!("{} does not fit the object set", path.display()))?;
             let record = loaded.file.train.clone().unwrap_or_default();
             stored_weights = loaded
                 .file
@@ -224,17 +227,14 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         }
         pending.push(s);
     }
-    let weights = stored_weights
-        .unwrap_or_else(|| class_weights(&counts, cfg.class_weight_power, cfg.class_weight_max_ratio));
+    let weights =
+        stored_weights.unwrap_or_else(|| class_weights(&counts, cfg.class_weight_power, cfg.class_weight_max_ratio));
     log.line(&format!("# pixel counts {counts:?} -> class weights {weights:?}"));
     let hyper = hyper_json(&cfg, &weights);
 
     let budget = cfg.minutes.map(|m| Duration::from_secs_f64(m * 60.0));
     let bar = if cfg.progress {
-        let len = cfg
-            .steps
-            .map(|s| s.saturating_sub(start_steps))
-            .unwrap_or_else(|| budget.map_or(0, |d| d.as_secs()));
+        let len = cfg.steps.map(|s| s.saturating_sub(start_steps)).unwrap_or_else(|| budget.map_or(0, |d| d.as_secs()));
         let b = indicatif::ProgressBar::new(len);
         b.set_style(
             indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} ETA {eta} {msg}")
@@ -260,7 +260,9 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         let frac = match (budget, cfg.steps) {
             (Some(d), _) if elapsed >= d => break,
             (_, Some(l)) if record.steps >= l => break,
-            (Some(d), Some(l)) => (elapsed.as_secs_f64() / d.as_secs_f64()).max(done as f64 / (l - start_steps).max(1) as f64),
+            (Some(d), Some(l)) => {
+                (elapsed.as_secs_f64() / d.as_secs_f64()).max(done as f64 / (l - start_steps).max(1) as f64)
+            }
             (Some(d), None) => elapsed.as_secs_f64() / d.as_secs_f64(),
             (None, Some(l)) => done as f64 / (l - start_steps).max(1) as f64,
             (None, None) => 1.0,
@@ -280,7 +282,8 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         );
         let target: Vec<u16> = batch.iter().flat_map(|s| s.target.iter().copied()).collect();
         let loss = weighted_cross_entropy(net.forward(input), &target, &weights);
-        let lv = loss.clone().into_data().try_to_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN) as f64;
+        let lv = loss.clone().into_data().try_to_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN)
+            as f64;
         if !lv.is_finite() {
             bail!("loss is {lv} at step {}", record.steps);
         }
@@ -297,7 +300,12 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         bar.set_message(msg.clone());
         if record.steps % 10 == 0 {
             curve.push((record.steps, ema));
-            log.line(&format!("step {} frames {} t {:.0}s | {msg}", record.steps, record.samples, t_start.elapsed().as_secs_f64()));
+            log.line(&format!(
+                "step {} frames {} t {:.0}s | {msg}",
+                record.steps,
+                record.samples,
+                t_start.elapsed().as_secs_f64()
+            ));
         }
         if last_ckpt.elapsed() >= cfg.checkpoint_every {
             record.seconds += last_ckpt.elapsed().as_secs_f64();

@@ -7,9 +7,9 @@ use std::collections::BTreeMap;
 use std::time::Instant;
 
 use fusepose_estimator::seg::SegEngine;
+use fusepose_scene::Intrinsics;
 use fusepose_scene::ObjectSet;
 use fusepose_scene::render::RenderTarget;
-use fusepose_scene::Intrinsics;
 
 use super::data::{frame_view, render_frame};
 
