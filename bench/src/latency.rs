@@ -64,7 +64,7 @@ pub fn plot_percentiles(
     let err = |e: &dyn std::fmt::Display| anyhow::anyhow!("{}: {e}", path.display());
     let labels = ["p50", "p99", "p99.9", "max"];
     let values: Vec<f64> = series.iter().flat_map(|(_, p)| p.scaled(ns_per_unit)).filter(|v| *v > 0.0).collect();
-    let y_min = values.iter().copied().fold(f64::INFINITY, f64::min).min(1.0).max(1e-3) * 0.5;
+    let y_min = values.iter().copied().fold(f64::INFINITY, f64::min).clamp(1e-3, 1.0) * 0.5;
     let y_max = values.iter().copied().fold(0.0, f64::max).max(y_min * 10.0) * 2.0;
     let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
     root.fill(&WHITE).map_err(|e| err(&e))?;

@@ -223,7 +223,7 @@ pub fn poll_until<T, E>(
             return Ok(None);
         }
         polls = polls.wrapping_add(1);
-        if yield_cpu && polls % YIELD_EVERY == 0 {
+        if yield_cpu && polls.is_multiple_of(YIELD_EVERY) {
             std::thread::yield_now();
         } else {
             std::hint::spin_loop();
@@ -297,7 +297,8 @@ mod tests {
         for i in 0..60u64 {
             q.observe(i * 10 * MS + (i * 7919 % 13) * 250_000);
         }
-        let n = 59 * 10 * MS + (59 * 7919 % 13) * 250_000;
+        let last = 59u64;
+        let n = last * 10 * MS + (last * 7919 % 13) * 250_000;
         if let WaitPlan::BlockUntil(until) = q.plan(SPIN, n + MS) {
             let next = q.next_arrival_ns(n + MS, 0).unwrap();
             assert!(next - until <= 800_000);

@@ -102,6 +102,8 @@ impl Tracks {
         let Some(slot) = (class_id as usize).checked_sub(1).and_then(|i| self.tracks.get_mut(i)) else {
             return;
         };
+        // Written so that a NaN fit (a degenerate solve) also drops the track.
+        #[allow(clippy::neg_cmp_op_on_partial_ord)]
         if !(outcome.fit_m <= self.config.max_fit_m) {
             *slot = None;
             return;

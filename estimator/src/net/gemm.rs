@@ -191,7 +191,7 @@ pub fn dense(
 /// row by row, evicts its own lines: a 32×864×1024 conv ran at 65 GFLOP/s,
 /// the same shape with 1040 columns at 116 (`fusepose-bench estimator`).
 pub fn cols_stride(hw: usize) -> usize {
-    if hw >= 256 && (hw * 4) % 1024 == 0 { hw + 16 } else { hw }
+    if hw >= 256 && (hw * 4).is_multiple_of(1024) { hw + 16 } else { hw }
 }
 
 /// Length of the im2col buffer [`conv3x3`] needs for `c_in` channels and `hw` output pixels.
@@ -199,6 +199,7 @@ pub fn cols_len(c_in: usize, hw: usize) -> usize {
     c_in * 9 * cols_stride(hw)
 }
 
+#[allow(clippy::too_many_arguments)] // the shapes of a preallocated conv call: input, weights, output, dims
 pub fn conv3x3(
     input: &[f32],
     c_in: usize,

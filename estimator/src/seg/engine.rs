@@ -83,6 +83,7 @@ pub const MIN_INTERIOR_CELLS: usize = 1;
 /// `max_elongation` (long side² / area; 0 = no limit) or with fewer than
 /// `min_interior` interior cells (all existing 4-neighbours of the same class). `seen`, `stack` and
 /// `members` are scratch of `cells.len()` capacity (never grown).
+#[allow(clippy::too_many_arguments)] // three limits and three scratch buffers, all from the engine
 fn drop_small_components(
     cells: &mut [u16],
     w: usize,
