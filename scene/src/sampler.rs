@@ -402,15 +402,7 @@ impl OcclusionProbe {
     /// smallest distance of any object's hidden fraction to it.
     fn miss(&mut self, set: &ObjectSet, objects: &[PlacedObject], cam: &Pose) -> Result<f64, SamplerError> {
         let mut items = Vec::with_capacity(objects.len());
-        for (i, o) in objects.iter().enumerate() {
-            let model =
-                set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
-            items.push(RenderItem {
-                mesh: &model.mesh,
-                pose: cam * o.table_from_object,
-                instance_label: o.instance_label,
-            });
-        }
+        push_object_items(set, objects, cam, &mut items)?;
         render::render_scene(&items, &self.k, &self.settings, &mut self.target)?;
         let (lo, hi) = self.range;
         let mut best = f64::INFINITY;
@@ -475,15 +467,7 @@ impl Scene {
         let mut items = Vec::with_capacity(self.objects.len() + 2);
         items.push(RenderItem { mesh: &self.backdrop.table, pose: cam, instance_label: 0 });
         items.push(RenderItem { mesh: &self.backdrop.room, pose: cam, instance_label: 0 });
-        for (i, o) in self.objects.iter().enumerate() {
-            let model =
-                set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
-            items.push(RenderItem {
-                mesh: &model.mesh,
-                pose: cam * o.table_from_object,
-                instance_label: o.instance_label,
-            });
-        }
+        push_object_items(set, &self.objects, &cam, &mut items)?;
         Ok(items)
     }
 }
@@ -547,6 +531,21 @@ pub fn render_view_labelled(
         target.map_labels_in_place(&truth.class_lut());
     }
     Ok(truth)
+}
+
+/// Appends each placed object's mesh, posed in the camera `cam` (camera ← table),
+/// with its instance label.
+fn push_object_items<'a>(
+    set: &'a ObjectSet,
+    objects: &[PlacedObject],
+    cam: &Pose,
+    items: &mut Vec<RenderItem<'a>>,
+) -> Result<(), SamplerError> {
+    for (i, o) in objects.iter().enumerate() {
+        let model = set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
+        items.push(RenderItem { mesh: &model.mesh, pose: cam * o.table_from_object, instance_label: o.instance_label });
+    }
+    Ok(())
 }
 
 #[cfg(test)]
