@@ -26,8 +26,8 @@ use crate::{alloc_count, cpu_time, loadavg};
 #[derive(Clone, Debug, clap::Args)]
 pub struct TrackingArgs {
     /// Objects per scene, comma separated (1 gives the single-object poses/s).
-    #[arg(long, value_delimiter = ',', default_value = "1,5")]
-    pub objects: Vec<usize>,
+    #[arg(long, alias = "objects", value_delimiter = ',', default_value = "1,5")]
+    pub objects_per_frame: Vec<usize>,
     /// Video sequences per object count.
     #[arg(long, default_value_t = 3)]
     pub sequences: usize,
@@ -60,7 +60,7 @@ pub struct TrackingArgs {
 impl Default for TrackingArgs {
     fn default() -> Self {
         Self {
-            objects: vec![1, 5],
+            objects_per_frame: vec![1, 5],
             sequences: 3,
             frames: 60,
             degrees_per_frame: 0.5,
@@ -202,7 +202,7 @@ pub fn run(args: &TrackingArgs) -> anyhow::Result<TrackingReport> {
     let (sequences, frames) =
         if args.smoke { (1, args.frames.min(8)) } else { (args.sequences.max(1), args.frames.max(2)) };
     let mut rows = Vec::new();
-    for &k in &args.objects {
+    for &k in &args.objects_per_frame {
         eprintln!("tracking: rendering {sequences} sequence(s) of {frames} frames with {k} object(s) ...");
         let videos: Vec<Video> = (0..sequences)
             .map(|s| {

@@ -1,5 +1,6 @@
 //! `fusepose camera`: act as a live RGB-D camera on iceoryx2 — replay a BOP
-//! split (frames preloaded, paced by a monotonic clock) or render tabletop
+//! split (frames preloaded, paced by a monotonic clock; `--dataset` is the
+//! dataset root or the split folder, as for every command) or render tabletop
 //! scenes of the built-in objects on the fly.
 //!
 //! The iceoryx2 namespace comes from `FUSEPOSE_IOX2_ROOT` / `FUSEPOSE_IOX2_PREFIX`.
@@ -27,9 +28,13 @@ pub struct Args {
     /// Camera name: frames go to fusepose/camera/<name>/frames.
     #[arg(long, default_value = "cam0")]
     pub name: String,
-    /// BOP split directory to replay (e.g. datasets/synth/test).
-    #[arg(long, value_name = "DATASET_DIR", conflicts_with = "synthetic")]
-    pub from: Option<PathBuf>,
+    /// BOP dataset to replay: its root (the --split folder is used) or a
+    /// split folder (e.g. data/synth or data/synth/test).
+    #[arg(long, alias = "from", value_name = "DIR", conflicts_with = "synthetic")]
+    pub dataset: Option<PathBuf>,
+    /// Split of a dataset root to replay (ignored when --dataset is a split folder).
+    #[arg(long, default_value = "test")]
+    pub split: String,
     /// Render scenes of the built-in objects on the fly instead of replaying.
     #[arg(long)]
     pub synthetic: bool,
@@ -63,10 +68,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         bail!("--fps must be positive, got {}", args.fps);
     }
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("fusepose-camera"))?;
-    match (&args.from, args.synthetic) {
+    match (&args.dataset, args.synthetic) {
         (Some(dir), false) => replay_bop(&ipc, &args, dir),
         (None, true) => synthetic(&ipc, &args),
-        _ => bail!("give either --from DATASET_DIR or --synthetic"),
+        _ => bail!("give either --dataset DIR or --synthetic"),
     }
 }
 
@@ -104,7 +109,8 @@ impl Progress {
 }
 
 fn replay_bop(ipc: &Ipc, args: &Args, dir: &Path) -> anyhow::Result<()> {
-    let dataset = fusepose_scene::bop::BopDataset::open(dir).with_context(|| format!("opening {}", dir.display()))?;
+    let dir = crate::dataset_path::resolve_bop_split(dir, &args.split)?;
+    let dataset = fusepose_scene::bop::BopDataset::open(&dir).with_context(|| format!("opening {}", dir.display()))?;
     let limit = args.frames.unwrap_or(usize::MAX);
     let t = Instant::now();
     let mut frames = Vec::new();

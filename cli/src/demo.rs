@@ -32,9 +32,6 @@ use anyhow::{Context, bail};
 pub use consumer::Args as ConsumerArgs;
 pub use daemon::{Args as DaemonArgs, DemoEstimator};
 
-/// The shipped pose network (with refiner), so the demo runs from any directory.
-static BUILTIN_WEIGHTS: &[u8] = include_bytes!("../../models/builtin.safetensors");
-
 /// The environment variables `IpcOptions::from_env` reads in every child.
 const ROOT_ENV: &str = "FUSEPOSE_IOX2_ROOT";
 const PREFIX_ENV: &str = "FUSEPOSE_IOX2_PREFIX";
@@ -60,8 +57,7 @@ pub struct Args {
     /// Estimator the daemon runs.
     #[arg(long, value_enum, default_value = "net")]
     pub estimator: DemoEstimator,
-    /// Pose-network weights (safetensors) [default: the built-in model compiled into this binary].
-    #[arg(long, value_name = "FILE")]
+    #[arg(long, value_name = "FILE", help = crate::weights::WEIGHTS_HELP)]
     pub weights: Option<PathBuf>,
     /// First scene seed of the synthetic camera; each scene is shown from
     /// --views-per-scene viewpoints, then the next seed follows. The default
@@ -180,15 +176,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let prefix = format!("fpdemo{}_", std::process::id());
     let env = [(ROOT_ENV, root.as_str()), (PREFIX_ENV, prefix.as_str())];
 
-    let weights = match &args.weights {
-        Some(path) if !path.exists() => bail!("--weights {}: no such file", path.display()),
-        Some(path) => path.clone(),
-        None => {
-            let path = run_dir.path().join("builtin.safetensors");
-            std::fs::write(&path, BUILTIN_WEIGHTS).with_context(|| format!("writing {}", path.display()))?;
-            path
-        }
-    };
+    let weights = crate::weights::resolve_weights(args.weights.as_deref())?;
+    // The children run in this directory too, but take an absolute path anyway.
+    let weights = std::fs::canonicalize(&weights).unwrap_or(weights);
     let estimator = match args.estimator {
         DemoEstimator::Net => "net",
         DemoEstimator::Icp => "icp",

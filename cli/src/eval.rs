@@ -16,7 +16,9 @@
 //! every estimator with both on the same frames. `--overlay DIR` writes one
 //! PNG per frame (labels tinted, poses drawn).
 
+mod cast;
 mod dataset;
+mod instances;
 mod masks;
 mod per_object;
 
@@ -24,8 +26,9 @@ use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
-use anyhow::{Context, bail};
+use anyhow::Context;
 use fusepose_estimator::net::{NetEstimator, NetOptions};
+use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
 use fusepose_estimator::{
     ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
     WorkspaceConfig,
@@ -57,9 +60,13 @@ impl EstimatorKind {
 
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
 pub enum MaskSource {
-    /// Ground-truth visible masks from the dataset.
+    /// Ground-truth visible masks from the dataset, flattened to class ids
+    /// (touching copies of a class become one region, as on a class-label wire).
     Gt,
-    /// The segmentation network's masks.
+    /// Ground-truth visible masks as an instance plane (each object its own instance).
+    GtInstances,
+    /// The segmentation network's masks (an instance plane when the segmenter
+    /// has the centre-offset head).
     Net,
 }
 
@@ -67,17 +74,19 @@ impl MaskSource {
     fn name(self) -> &'static str {
         match self {
             MaskSource::Gt => "gt",
+            MaskSource::GtInstances => "gt-instances",
             MaskSource::Net => "net",
         }
     }
 }
 
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Clone, Debug)]
 pub struct Args {
-    /// Dataset: a BOP root or split folder, or a YCB-Video root.
+    /// Dataset: a BOP dataset root (its --split folder is used) or a split
+    /// folder itself, or a YCB-Video root.
     #[arg(long)]
     pub dataset: PathBuf,
-    /// BOP split under the dataset root.
+    /// BOP split under the dataset root (ignored when --dataset is a split folder).
     #[arg(long, default_value = "test")]
     pub split: String,
     /// Estimator to evaluate.
@@ -116,12 +125,14 @@ pub struct Args {
     /// Object set: `builtin` or a mesh folder (default: the one the dataset names, else builtin).
     #[arg(long)]
     pub objects: Option<String>,
-    /// Metres per mesh-file unit for a mesh folder.
-    #[arg(long, default_value_t = 1.0)]
-    pub mesh_scale: f64,
-    /// Network weights (safetensors) for `--estimator net`.
-    #[arg(long)]
+    /// Metres per mesh-file unit for a mesh folder (0.001 for millimetre meshes).
+    #[arg(long, alias = "mesh-scale", default_value_t = 1.0)]
+    pub scale: f64,
+    #[arg(long, help = crate::weights::WEIGHTS_HELP)]
     pub weights: Option<PathBuf>,
+    /// Base seed of each frame's randomness, e.g. point sampling (frame i uses seed + i).
+    #[arg(long, default_value_t = 0)]
+    pub seed: u64,
     /// Evaluate only the first N frames.
     #[arg(long)]
     pub limit: Option<usize>,
@@ -143,6 +154,16 @@ pub struct Args {
     /// as the daemon's `estimator.join_parts`.
     #[arg(long, default_value_t = 1.0)]
     pub join_parts: f32,
+    /// Pose verification against the depth image, as the daemon's
+    /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
+    /// default), `flag` (kept, counted) or `off`.
+    #[arg(long, default_value = "drop", value_parser = ["drop", "flag", "off"])]
+    pub verify: String,
+    /// Verification thresholds (default: the daemon's).
+    #[arg(long)]
+    pub verify_min_fit: Option<f32>,
+    #[arg(long)]
+    pub verify_min_inliers: Option<f32>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -159,12 +180,21 @@ pub struct Args {
     /// Write a PNG of the ADD-S accuracy–threshold curves.
     #[arg(long)]
     pub plot: Option<PathBuf>,
+    /// Colour cast applied to each frame's RGB in linear light (eval/cast.rs);
+    /// a list (`none,warm,cool,dim`) evaluates each and prints a row per cast.
+    #[arg(long, value_enum, value_delimiter = ',', default_value = "none")]
+    pub cast: Vec<cast::Cast>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    cast::run_each(args, run_cast)
+}
+
+/// One evaluation under `args.cast[0]`; returns the summaries `--json` writes.
+fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
     let mut data = EvalDataset::open(&args.dataset, &args.split)?;
     let source = args.objects.clone().or_else(|| data.object_source()).unwrap_or_else(|| "builtin".into());
-    let objects = fusepose_scene::mesh_io::load_object_set(&source, args.mesh_scale)
+    let objects = fusepose_scene::mesh_io::load_object_set(&source, args.scale)
         .with_context(|| format!("loading object set `{source}`"))?;
     data.bind(&objects)?;
     let kinds = if args.compare.is_empty() { vec![args.estimator] } else { args.compare.clone() };
@@ -178,13 +208,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut net_masks = match mask_sources.contains(&MaskSource::Net) {
         false => None,
         true => {
-            let weights = args
-                .seg_weights
-                .as_ref()
-                .or(args.weights.as_ref())
-                .context("--masks net needs --weights FILE with an embedded segmenter (or --seg-weights FILE)")?;
+            let weights = match &args.seg_weights {
+                Some(path) => path.clone(),
+                None => crate::weights::resolve_weights(args.weights.as_deref())?,
+            };
             Some(NetMasks::load(
-                weights,
+                &weights,
                 &objects,
                 args.seg_min_cells,
                 args.seg_max_elongation,
@@ -209,20 +238,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     bar.set_prefix(runners.iter().map(|r| r.name.clone()).collect::<Vec<_>>().join(","));
     for index in 0..frames {
-        let frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
+        let mut frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
+        let colour_cast = args.cast.first().copied().unwrap_or(cast::Cast::None);
+        colour_cast.apply(&mut frame.rgb, args.seed.wrapping_add(index as u64));
         if let Some(seg) = &mut net_masks {
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
         }
         for runner in &mut runners {
             let labels = match (runner.masks, &net_masks) {
-                (MaskSource::Net, Some(seg)) => &seg.labels,
-                _ => &frame.labels,
+                (MaskSource::Net, Some(seg)) => seg.plane(),
+                (MaskSource::GtInstances, _) => {
+                    LabelPlane::Instances { ids: &frame.instances, classes: &frame.instance_classes }
+                }
+                _ => LabelPlane::U16(&frame.labels),
             };
-            runner.evaluate(&frame, labels, index as u64, &metrics)?;
+            runner.evaluate(&frame, labels, args.seed.wrapping_add(index as u64), &metrics)?;
         }
         if let (Some(dir), Some(last)) = (&args.overlay, runners.last()) {
             let labels = match (last.masks, &net_masks) {
-                (MaskSource::Net, Some(seg)) => &seg.labels,
+                (MaskSource::Net, Some(seg)) => &seg.class_labels,
                 _ => &frame.labels,
             };
             let poses: Vec<(u16, Pose)> = last.poses.as_slice().iter().map(|p| (p.class_id, pose_of(p))).collect();
@@ -255,9 +289,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(path) = &args.json {
         let json = if summaries.len() == 1 {
-            summaries.into_iter().next().map(|(_, v)| v).unwrap_or_default()
+            summaries.values().next().cloned().unwrap_or_default()
         } else {
-            serde_json::Value::Object(summaries)
+            serde_json::Value::Object(summaries.clone())
         };
         std::fs::write(path, serde_json::to_string_pretty(&json)?)
             .with_context(|| format!("writing {}", path.display()))?;
@@ -267,7 +301,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         write_plot(&runners, path)?;
         println!("wrote {}", path.display());
     }
-    Ok(())
+    Ok(summaries)
 }
 
 /// Visible-fraction buckets of the breakdown: (upper bound, name). BOP's
@@ -302,6 +336,15 @@ struct Runner {
     unmatched: usize,
     /// Regions joined into another of their class (`--join-parts`).
     joined: usize,
+    /// Instance regions against the ground-truth instance masks.
+    instance_counts: instances::InstanceCounts,
+    /// Pose verification (`--verify`): the checker, whether failures are dropped,
+    /// and what it judged: (ghost poses failing, matched poses failing,
+    /// matched poses under 2 cm ADD-S failing, poses checked).
+    verifier: Option<Verifier>,
+    verify_drop: bool,
+    verify_counts: [usize; 4],
+    verify_ms: Vec<f64>,
     min_confidence: f32,
     csv: Option<BopResultsWriter>,
     per_object: Option<PerObjectWriter<std::io::BufWriter<std::fs::File>>>,
@@ -324,11 +367,9 @@ impl Runner {
                 WorkspaceConfig { max_instances: args.max_instances, ..WorkspaceConfig::default() },
             ),
             EstimatorKind::Net => {
-                let Some(weights) = &args.weights else {
-                    bail!("--estimator net needs --weights FILE (a safetensors file from `fusepose train`)");
-                };
+                let weights = crate::weights::resolve_weights(args.weights.as_deref())?;
                 let options = NetOptions { refine_iterations: args.refine_iterations, ..NetOptions::default() };
-                let net = NetEstimator::load(weights, objects, options)
+                let net = NetEstimator::load(&weights, objects, options)
                     .with_context(|| format!("loading {}", weights.display()))?;
                 let mut config = net.workspace_config(args.max_instances);
                 config.num_points = args.points.unwrap_or(config.num_points);
@@ -369,17 +410,32 @@ impl Runner {
             refused: BTreeMap::new(),
             unmatched: 0,
             joined: 0,
+            instance_counts: instances::InstanceCounts::default(),
+            verifier: (args.verify != "off").then(|| {
+                let d = VerifyConfig::default();
+                Verifier::new(
+                    objects,
+                    VerifyConfig {
+                        min_fit: args.verify_min_fit.unwrap_or(d.min_fit),
+                        min_inlier_fraction: args.verify_min_inliers.unwrap_or(d.min_inlier_fraction),
+                        ..d
+                    },
+                )
+            }),
+            verify_drop: args.verify == "drop",
+            verify_counts: [0; 4],
+            verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
             csv,
             per_object,
         })
     }
 
-    /// Estimates `frame` with instance masks from `labels` (class ids, one per pixel) and scores it.
+    /// Estimates `frame` with instance masks from `labels` and scores it.
     fn evaluate(
         &mut self,
         frame: &EvalFrame,
-        labels: &[u16],
+        labels: LabelPlane<'_>,
         seed: u64,
         metrics: &[ObjectMetric],
     ) -> anyhow::Result<()> {
@@ -388,10 +444,11 @@ impl Runner {
             color_format: ColorFormat::Rgb8,
             color: &frame.rgb,
             depth: DepthPlane::U16 { data: &frame.depth, scale: frame.depth_unit_m as f32 },
-            labels: Some(LabelPlane::U16(labels)),
+            labels: Some(labels),
         };
         let start = Instant::now();
         let prepared = self.workspace.prepare(&view, seed);
+        let prepared_ok = prepared.is_ok();
         self.joined += self.workspace.stats().joined_parts as usize;
         let estimated = match prepared {
             Ok(_) => self.estimator.estimate(&view, &mut self.workspace, &mut self.poses).map(|_| ()),
@@ -399,6 +456,14 @@ impl Runner {
         };
         self.poses.retain_confident(self.min_confidence);
         let seconds = start.elapsed().as_secs_f64();
+        if prepared_ok && frame.instances.iter().any(|&i| i != 0) {
+            let ids: Vec<u32> =
+                (0..self.workspace.instances.len()).filter_map(|i| self.workspace.component_id(i)).collect();
+            self.instance_counts.add_frame(&frame.instances, self.workspace.component_ids(), &ids);
+        }
+        if estimated.is_ok() {
+            self.verify(&view, frame, metrics);
+        }
         if let Err(e) = estimated {
             let reason = match &e {
                 fusepose_estimator::EstimateError::Frame(f) => f.reason(),
@@ -448,6 +513,70 @@ impl Runner {
         Ok(())
     }
 
+    /// Verifies every pose against the frame's depth, counts what fails
+    /// (ghosts vs poses of real objects, judged by matching before the drop)
+    /// and, with `--verify drop`, removes the failures.
+    fn verify(&mut self, view: &FrameView<'_>, frame: &EvalFrame, metrics: &[ObjectMetric]) {
+        let Some(verifier) = self.verifier.as_mut() else { return };
+        let start = Instant::now();
+        let ws = &self.workspace;
+        let verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
+            .poses
+            .as_slice()
+            .iter()
+            .map(|p| {
+                ws.component_id(p.instance_id as usize)
+                    .map(|id| verifier.verify(view, MaskRef { ids: ws.component_ids(), id, bbox: p.bbox }, p))
+            })
+            .collect();
+        let passed: Vec<bool> = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
+        if std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some() {
+            let pairs = match_estimates(&frame.gt, self.poses.as_slice());
+            for (p, v) in self.poses.as_slice().iter().zip(&verdicts) {
+                let add_s = pairs.iter().find(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, p))).and_then(|(gt, _)| {
+                    metrics.get(gt.class_id as usize - 1).map(|m| m.errors(&pose_of(p), &gt.pose).add_s)
+                });
+                if let Some(v) = v {
+                    eprintln!(
+                        "VTRACE class {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} fit {:.3} res {:.4}",
+                        p.class_id,
+                        p.translation.z,
+                        add_s.map_or(-1.0, |a| a),
+                        v.inlier_fraction,
+                        v.mask_coverage,
+                        v.behind_fraction,
+                        v.fit,
+                        v.depth_residual_m
+                    );
+                }
+            }
+        }
+        self.verify_ms.push(start.elapsed().as_secs_f64() * 1e3 / passed.len().max(1) as f64);
+        let poses = self.poses.as_slice();
+        let pairs = match_estimates(&frame.gt, poses);
+        for (i, p) in poses.iter().enumerate() {
+            self.verify_counts[3] += 1;
+            if passed[i] {
+                continue;
+            }
+            match pairs.iter().find(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, p))) {
+                None => self.verify_counts[0] += 1,
+                Some((gt, _)) => {
+                    self.verify_counts[1] += 1;
+                    let good = metrics
+                        .get(gt.class_id as usize - 1)
+                        .map(|m| m.errors(&pose_of(p), &gt.pose))
+                        .is_some_and(|e| e.add_s < 0.02);
+                    self.verify_counts[2] += good as usize;
+                }
+            }
+        }
+        if self.verify_drop {
+            let mut it = passed.iter();
+            self.poses.retain(|_| it.next().copied().unwrap_or(false));
+        }
+    }
+
     fn print(&self, dataset: &str, frames: usize) {
         println!("\n{} on {dataset}: {frames} frames, {} ground-truth objects", self.name, self.table.overall().count);
         print!("{}", self.table);
@@ -471,6 +600,18 @@ impl Runner {
         }
         if self.joined > 0 {
             println!("regions joined as pieces of one object: {}", self.joined);
+        }
+        if self.instance_counts.truth > 0 {
+            println!("{}", self.instance_counts.summary());
+        }
+        if self.verifier.is_some() {
+            let [ghosts, real, good, all] = self.verify_counts;
+            println!(
+                "verification ({}): {all} poses checked, {} failed: {ghosts} ghosts, {real} of real objects ({good} of them under 2 cm ADD-S); {:.3} ms per object (median)",
+                if self.verify_drop { "failures dropped" } else { "flag only" },
+                ghosts + real,
+                percentile(&self.verify_ms, 0.5)
+            );
         }
         if !self.refused.is_empty() {
             println!("frames refused: {:?}", self.refused);
@@ -497,6 +638,20 @@ impl Runner {
             o.insert("frames_refused".into(), self.refused.values().sum::<usize>().into());
             o.insert("unmatched_estimates".into(), self.unmatched.into());
             o.insert("joined_parts".into(), self.joined.into());
+            if self.instance_counts.truth > 0 {
+                o.insert("instances".into(), self.instance_counts.json());
+            }
+            if self.verifier.is_some() {
+                let [ghosts, real, good, all] = self.verify_counts;
+                o.insert(
+                    "verification".into(),
+                    serde_json::json!({
+                        "mode": if self.verify_drop { "drop" } else { "flag" },
+                        "checked": all, "failed_ghosts": ghosts, "failed_real": real,
+                        "failed_real_under_2cm": good, "ms_per_object_median": percentile(&self.verify_ms, 0.5),
+                    }),
+                );
+            }
         }
         let per_object: serde_json::Map<String, serde_json::Value> =
             self.table.rows().iter().map(|r| (r.name.clone(), row(r))).collect();

@@ -4,6 +4,7 @@
 //! scene, estimator, train or client. No logic of its own beyond wiring.
 
 mod camera;
+mod dataset_path;
 mod demo;
 mod eval;
 mod objects;
@@ -12,6 +13,7 @@ mod render;
 mod stats;
 mod train;
 mod watch;
+mod weights;
 
 use clap::{Parser, Subcommand};
 

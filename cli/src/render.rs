@@ -6,6 +6,12 @@
 //! part of the mix, so `--split test --seed 0` and `--split train --seed 0`
 //! draw different scenes (train and test never share a scene), while the same
 //! (split, seed) always reproduces the same dataset.
+//!
+//! Domain randomisation (`--randomize`, default `default`) and the depth-sensor
+//! model (`--depth-sensor`, default `structured-light`) follow
+//! `SamplerConfig::training()`; `--randomize off --depth-sensor basic` gives
+//! the frames of datasets rendered before randomisation existed, bit for bit.
+//! What was used is recorded per split in `fusepose_dataset.json`.
 
 use std::path::{Path, PathBuf};
 use std::time::{Duration, Instant};
@@ -15,7 +21,7 @@ use fusepose_scene::Intrinsics;
 use fusepose_scene::bop::{BopWriter, FrameToWrite, InstanceToWrite, ObjectSource};
 use fusepose_scene::contact_sheet::{ContactSheet, FrameView};
 use fusepose_scene::mesh_io::load_object_set;
-use fusepose_scene::render::{DEPTH_U16_PER_METRE, NoiseConfig, RenderTarget};
+use fusepose_scene::render::{DEPTH_U16_PER_METRE, DepthSensor, NoiseConfig, Randomize, RenderTarget};
 use fusepose_scene::sampler::{SamplerConfig, render_view, sample_scene};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -50,13 +56,89 @@ pub enum Toggle {
     Off,
 }
 
+/// Domain randomisation level (`fusepose_scene::render::Randomize`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum RandomizeArg {
+    /// None: the scenes and images of datasets rendered before randomisation.
+    Off,
+    /// The training ranges: lights, textures, walls, distractors, occluders, shadows, highlights, camera pipeline.
+    Default,
+    /// Every range widened.
+    Strong,
+}
+
+impl From<RandomizeArg> for Randomize {
+    fn from(r: RandomizeArg) -> Self {
+        match r {
+            RandomizeArg::Off => Randomize::Off,
+            RandomizeArg::Default => Randomize::Default,
+            RandomizeArg::Strong => Randomize::Strong,
+        }
+    }
+}
+
+/// Depth-sensor model (`fusepose_scene::render::DepthSensor`).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub enum DepthSensorArg {
+    /// Exact rendered depth.
+    Ideal,
+    /// The original generic noise model.
+    Basic,
+    /// Active stereo / structured light (RealSense D4xx, Kinect v1): projector shadows, quantised disparity.
+    StructuredLight,
+    /// Time of flight (Kinect v2, Azure Kinect): multipath in corners, mixed pixels at edges.
+    Tof,
+}
+
+impl From<DepthSensorArg> for DepthSensor {
+    fn from(d: DepthSensorArg) -> Self {
+        match d {
+            DepthSensorArg::Ideal => DepthSensor::Ideal,
+            DepthSensorArg::Basic => DepthSensor::Basic,
+            DepthSensorArg::StructuredLight => DepthSensor::StructuredLight,
+            DepthSensorArg::Tof => DepthSensor::Tof,
+        }
+    }
+}
+
+/// An inclusive count range written `N` or `MIN..MAX`.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct CountRange(pub usize, pub usize);
+
+impl std::str::FromStr for CountRange {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let parse =
+            |t: &str| t.trim().parse::<usize>().map_err(|_| format!("'{s}' is not N or MIN..MAX (whole numbers)"));
+        let (lo, hi) = match s.split_once("..") {
+            Some((a, b)) => (parse(a)?, parse(b.trim_start_matches('='))?),
+            None => {
+                let n = parse(s)?;
+                (n, n)
+            }
+        };
+        if lo == 0 || hi < lo {
+            return Err(format!("'{s}': need 1 <= MIN <= MAX"));
+        }
+        Ok(CountRange(lo, hi))
+    }
+}
+
+/// A probability in 0..=1.
+fn probability(s: &str) -> Result<f64, String> {
+    match s.trim().parse::<f64>() {
+        Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
+        _ => Err(format!("'{s}' is not a probability between 0 and 1")),
+    }
+}
+
 #[derive(clap::Args, Debug)]
 pub struct Args {
     /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
     #[arg(long, default_value = "builtin")]
     pub objects: String,
     /// Metres per mesh-file unit for a mesh folder (0.001 for millimetre models).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long = "scale", alias = "mesh-scale", default_value_t = 1.0)]
     pub mesh_scale: f64,
     /// Number of scenes.
     #[arg(long, default_value_t = 10)]
@@ -70,9 +152,31 @@ pub struct Args {
     /// Base seed; combined with the split so train and test never share scenes.
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
-    /// Depth and colour sensor noise.
+    /// Sensor noise: `off` gives exact depth and no colour noise (the
+    /// randomised camera pipeline still applies unless --randomize off).
     #[arg(long, value_enum, default_value_t = Toggle::On)]
     pub noise: Toggle,
+    /// Domain randomisation. `off` with `--depth-sensor basic` reproduces
+    /// datasets rendered before randomisation (the original sampler ranges).
+    #[arg(long, value_enum, default_value_t = RandomizeArg::Default)]
+    pub randomize: RandomizeArg,
+    /// Depth-sensor model applied to the rendered depth.
+    #[arg(long, value_enum, default_value_t = DepthSensorArg::StructuredLight)]
+    pub depth_sensor: DepthSensorArg,
+    /// Copies of each drawn class: N or MIN..MAX, each its own instance
+    /// (default: 1..2 with randomisation, 1 with --randomize off).
+    #[arg(long, value_name = "N|MIN..MAX")]
+    pub instances_per_class: Option<CountRange>,
+    /// Probability that a scene holds a heap of 4-8 touching copies of one
+    /// object; `--heap` alone means every scene (default: 0.15 with
+    /// randomisation, 0 with --randomize off).
+    #[arg(long, value_name = "P", num_args = 0..=1, default_missing_value = "1", value_parser = probability)]
+    pub heap: Option<f64>,
+    /// Probability that a scene holds a pair of identical objects side by side
+    /// (0-3 mm apart); `--pairs` alone means every scene (default: 0.35 with
+    /// randomisation, 0 with --randomize off).
+    #[arg(long, value_name = "P", num_args = 0..=1, default_missing_value = "1", value_parser = probability)]
+    pub pairs: Option<f64>,
     /// Split to write.
     #[arg(long, value_enum, default_value_t = Split::Train)]
     pub split: Split,
@@ -127,7 +231,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     writer.set_split_params(split_params(&args))?;
 
     let k = Intrinsics::YCB_VIDEO;
-    let cfg = SamplerConfig { views: args.frames_per_scene as usize, intrinsics: k, ..SamplerConfig::default() };
+    let cfg = sampler_config(&args, k);
     let noise = match args.noise {
         Toggle::On => NoiseConfig::default(),
         Toggle::Off => NoiseConfig::off(),
@@ -166,7 +270,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             writer.write_frame(&FrameToWrite {
                 scene_id,
                 im_id: view as u32,
-                intrinsics: k,
+                // The camera actually used (jittered per view with randomisation).
+                intrinsics: truth.intrinsics,
                 rgb: target.rgb(),
                 depth: target.depth_u16(),
                 depth_unit_m: 1.0 / DEPTH_U16_PER_METRE,
@@ -198,7 +303,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     Ok(())
 }
 
+/// The sampler configuration the flags ask for: `SamplerConfig::training()`
+/// with randomisation, `SamplerConfig::default()` (the original ranges)
+/// without, then the explicit flags.
+pub fn sampler_config(args: &Args, k: Intrinsics) -> SamplerConfig {
+    let randomize = Randomize::from(args.randomize);
+    let base = if randomize == Randomize::Off { SamplerConfig::default() } else { SamplerConfig::training() };
+    let mut cfg = SamplerConfig {
+        views: args.frames_per_scene as usize,
+        intrinsics: k,
+        randomize,
+        depth_sensor: args.depth_sensor.into(),
+        ..base
+    };
+    if let Some(CountRange(lo, hi)) = args.instances_per_class {
+        cfg.instances_per_class = (lo, hi);
+    }
+    if let Some(p) = args.heap {
+        cfg.heap_probability = p;
+    }
+    if let Some(p) = args.pairs {
+        cfg.pair_probability = p;
+    }
+    cfg
+}
+
 fn split_params(args: &Args) -> serde_json::Value {
+    let cfg = sampler_config(args, Intrinsics::YCB_VIDEO);
     serde_json::json!({
         "seed": args.seed,
         "seed_rule": "scene i uses splitmix64(splitmix64(splitmix64(seed) ^ split_tag) ^ i)",
@@ -207,6 +338,21 @@ fn split_params(args: &Args) -> serde_json::Value {
         "noise": args.noise == Toggle::On,
         "objects": args.objects,
         "mesh_scale": args.mesh_scale,
+        "randomize": Randomize::from(args.randomize).to_string(),
+        "depth_sensor": DepthSensor::from(args.depth_sensor).to_string(),
+        "intrinsics_jitter": if cfg.randomize.is_on() { "per view; scene_camera.json holds the camera used" } else { "none" },
+        "sampler": {
+            "objects_per_scene": [cfg.min_objects, cfg.max_objects],
+            "instances_per_class": [cfg.instances_per_class.0, cfg.instances_per_class.1],
+            "pair_probability": cfg.pair_probability,
+            "pair_gap_m": [cfg.pair_gap_m.0, cfg.pair_gap_m.1],
+            "heap_probability": cfg.heap_probability,
+            "heap_size": [cfg.heap_size.0, cfg.heap_size.1],
+            "camera_distance_m": [cfg.camera_distance_m.0, cfg.camera_distance_m.1],
+            "camera_elevation_deg": [cfg.camera_elevation_deg.0, cfg.camera_elevation_deg.1],
+            "camera_max_roll_deg": cfg.camera_max_roll_deg,
+            "look_at_jitter_m": cfg.look_at_jitter_m,
+        },
     })
 }
 
@@ -214,13 +360,15 @@ fn print_summary(args: &Args, set: &fusepose_scene::ObjectSet, dir: &Path, t: &T
     let frames = t.frames.max(1) as f64;
     let occlusion = if t.occlusion_count == 0 { 0.0 } else { 100.0 * t.occlusion_sum / t.occlusion_count as f64 };
     println!(
-        "wrote {} frames ({} scenes x {} views, split {}, seed {}, noise {}) to {}",
+        "wrote {} frames ({} scenes x {} views, split {}, seed {}, noise {}, randomize {}, depth sensor {}) to {}",
         t.frames,
         args.scenes,
         args.frames_per_scene,
         args.split.name(),
         args.seed,
         if args.noise == Toggle::On { "on" } else { "off" },
+        Randomize::from(args.randomize),
+        DepthSensor::from(args.depth_sensor),
         dir.display()
     );
     println!(
@@ -243,6 +391,42 @@ fn print_summary(args: &Args, set: &fusepose_scene::ObjectSet, dir: &Path, t: &T
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    fn args(extra: &[&str]) -> Args {
+        use clap::Parser;
+        #[derive(clap::Parser)]
+        struct Cli {
+            #[command(flatten)]
+            args: Args,
+        }
+        let argv = ["render", "--out", "/tmp/x"].iter().chain(extra).copied();
+        Cli::try_parse_from(argv).unwrap().args
+    }
+
+    #[test]
+    fn flags_pick_the_sampler_config() {
+        let k = Intrinsics::YCB_VIDEO;
+        // Defaults: the training configuration with the structured-light sensor.
+        let cfg = sampler_config(&args(&[]), k);
+        let training = SamplerConfig { views: 5, intrinsics: k, ..SamplerConfig::training() };
+        assert_eq!(cfg, training);
+        assert_eq!((cfg.randomize, cfg.depth_sensor), (Randomize::Default, DepthSensor::StructuredLight));
+        // Off + basic: exactly the original sampler (old splits reproduce).
+        let cfg = sampler_config(&args(&["--randomize", "off", "--depth-sensor", "basic"]), k);
+        assert_eq!(cfg, SamplerConfig { views: 5, intrinsics: k, ..SamplerConfig::default() });
+        let cfg = sampler_config(
+            &args(&["--randomize", "strong", "--depth-sensor", "tof", "--instances-per-class", "2..4", "--heap"]),
+            k,
+        );
+        assert_eq!((cfg.randomize, cfg.depth_sensor), (Randomize::Strong, DepthSensor::Tof));
+        assert_eq!(cfg.instances_per_class, (2, 4));
+        assert_eq!(cfg.heap_probability, 1.0);
+        let cfg = sampler_config(&args(&["--instances-per-class", "3", "--heap", "0.25", "--pairs", "0"]), k);
+        assert_eq!((cfg.instances_per_class, cfg.heap_probability, cfg.pair_probability), ((3, 3), 0.25, 0.0));
+        assert!("0..2".parse::<CountRange>().is_err() && "3..2".parse::<CountRange>().is_err());
+        assert_eq!("1..=3".parse::<CountRange>().unwrap(), CountRange(1, 3));
+        assert!(probability("1.5").is_err());
+    }
 
     #[test]
     fn train_and_test_never_share_seeds() {

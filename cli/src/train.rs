@@ -11,6 +11,8 @@ use std::time::Duration;
 
 use anyhow::Context;
 use fusepose_scene::mesh_io::load_object_set;
+use fusepose_scene::render::{DepthSensor, Randomize};
+use fusepose_scene::sampler::SamplerConfig;
 use fusepose_train::data::Source;
 use fusepose_train::trainer::{Stage, TrainOptions, train, validate_file};
 
@@ -32,12 +34,16 @@ pub struct Args {
     #[arg(long, default_value = "builtin")]
     pub objects: String,
     /// Metres per mesh-file unit (not applied to `builtin`).
-    #[arg(long, default_value_t = 1.0)]
+    #[arg(long, alias = "mesh-scale", default_value_t = 1.0)]
     pub scale: f64,
-    /// Train on a BOP dataset split folder (e.g. `data/out/train`; obj_ids = class ids)
+    /// Train on a BOP dataset — its root (the --split folder is used) or a split
+    /// folder (e.g. `data/out` or `data/out/train`; obj_ids = class ids) —
     /// instead of rendering: frames with index % 10 != 0 train, the others validate.
     #[arg(long)]
     pub dataset: Option<PathBuf>,
+    /// Split of a --dataset root (ignored when --dataset is a split folder).
+    #[arg(long, default_value = "train")]
+    pub split: String,
     /// Output weight file. With `--stage seg`: a pose-network file here gets the
     /// segmenter embedded (objects must match), any other path a segmenter-only file.
     #[arg(long, default_value = "models/builtin.safetensors")]
@@ -103,6 +109,36 @@ pub struct Args {
     /// `--stage seg`: network input size `WxH` of a fresh run (default 160x120).
     #[arg(long)]
     pub seg_size: Option<String>,
+    /// Domain randomisation of the rendered training scenes: off | default | strong
+    /// (lights, shadows, materials, camera pipeline, tables, distractors, viewpoints).
+    #[arg(long, default_value = "default")]
+    pub randomize: Randomize,
+    /// Depth-sensor model of the rendered training frames: ideal | basic | structured-light | tof.
+    #[arg(long, default_value = "structured-light")]
+    pub depth_sensor: DepthSensor,
+    /// Several copies of one class per scene (touching pairs, heaps), as the
+    /// training default; `--single-instances` draws each class at most once.
+    #[arg(long)]
+    pub single_instances: bool,
+}
+
+/// The training scene sampler the flags ask for: `SamplerConfig::training()`
+/// with their randomisation level and depth sensor; with `--randomize off
+/// --depth-sensor basic --single-instances` exactly the scenes of runs before
+/// randomisation existed.
+pub fn training_sampler(args: &Args) -> SamplerConfig {
+    let plain = args.randomize == Randomize::Off && args.depth_sensor == DepthSensor::Basic && args.single_instances;
+    if plain {
+        return SamplerConfig::default();
+    }
+    let mut s =
+        SamplerConfig { randomize: args.randomize, depth_sensor: args.depth_sensor, ..SamplerConfig::training() };
+    if args.single_instances {
+        s.instances_per_class = (1, 1);
+        s.pair_probability = 0.0;
+        s.heap_probability = 0.0;
+    }
+    s
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -118,7 +154,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return bench(&set, args.resume.as_deref());
     }
     let source = match &args.dataset {
-        Some(dir) => Source::bop(dir, &set)?,
+        Some(dir) => Source::bop(&crate::dataset_path::resolve_bop_split(dir, &args.split)?, &set)?,
         None => Source::Rendered,
     };
     if args.validate_only {
@@ -138,6 +174,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(0.0..=1.0).contains(&args.min_visible) {
         anyhow::bail!("--min-visible must be in 0..=1, got {}", args.min_visible);
     }
+    let sampler = training_sampler(&args);
     let opts = TrainOptions {
         out: args.out,
         minutes: args.minutes,
@@ -162,11 +199,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 args.seg_masks * 100.0
             ),
             None => format!("{} objects, tabletop scenes rendered on the fly with sensor noise", args.objects),
-        } + &format!(", objects >= {:.0} % visible", args.min_visible * 100.0),
+        } + &format!(
+            ", objects >= {:.0} % visible, randomize {}, depth sensor {}, {}",
+            args.min_visible * 100.0,
+            args.randomize,
+            args.depth_sensor,
+            if args.single_instances { "one copy per class" } else { "several copies per class" }
+        ),
         source,
         progress: !args.quiet,
         seg_masks: args.seg_masks,
         min_visible: args.min_visible,
+        sampler,
     };
     let summary = train(Arc::new(set), &opts)?;
     println!(

@@ -28,7 +28,8 @@ pub struct Args {
     /// Write `frame_<sequence>.png` here per answered frame: frame, labels, poses drawn.
     #[arg(long)]
     pub overlay: Option<std::path::PathBuf>,
-    /// With --overlay: network file with an embedded segmenter, to show labels of frames that carry none.
+    /// With --overlay: network file with an embedded segmenter, to show labels of frames that carry
+    /// none [default: models/builtin.safetensors, else the copy built into this binary].
     #[arg(long)]
     pub weights: Option<std::path::PathBuf>,
 }
@@ -96,12 +97,17 @@ fn text(msg: &PoseMessage) -> String {
     out
 }
 
+/// A float as JSON: `null` when NaN/infinite (not verified), else `decimals` places.
+fn json_number(x: f32, decimals: usize) -> String {
+    if x.is_finite() { format!("{x:.decimals$}") } else { "null".to_owned() }
+}
+
 fn json_object(o: &WireObjectPose) -> String {
     let t = o.translation_m.map(|v| v * 1e3);
     let rpy = rpy_from_quaternion(o.quaternion).map(f64::to_degrees);
     let q = o.quaternion;
     format!(
-        "{{\"class_id\":{},\"name\":{:?},\"instance_id\":{},\"xyz_mm\":[{:.3},{:.3},{:.3}],\"rpy_deg\":[{:.3},{:.3},{:.3}],\"quaternion_xyzw\":[{:.6},{:.6},{:.6},{:.6}],\"confidence\":{:.4},\"refine_iterations\":{},\"mask_pixels\":{},\"bbox\":[{},{},{},{}]}}",
+        "{{\"class_id\":{},\"name\":{:?},\"instance_id\":{},\"xyz_mm\":[{:.3},{:.3},{:.3}],\"rpy_deg\":[{:.3},{:.3},{:.3}],\"quaternion_xyzw\":[{:.6},{:.6},{:.6},{:.6}],\"confidence\":{:.4},\"refine_iterations\":{},\"mask_pixels\":{},\"bbox\":[{},{},{},{}],\"flags\":{},\"fit_score\":{},\"depth_residual_m\":{}}}",
         o.class_id,
         object_name(o.class_id),
         o.instance_id,
@@ -121,7 +127,10 @@ fn json_object(o: &WireObjectPose) -> String {
         o.bbox[0],
         o.bbox[1],
         o.bbox[2],
-        o.bbox[3]
+        o.bbox[3],
+        o.flags,
+        json_number(o.fit_score, 4),
+        json_number(o.depth_residual_m, 6)
     )
 }
 
@@ -150,13 +159,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut overlay = match &args.overlay {
         Some(dir) => {
             let services = fusepose_client::CameraServices::open(&ipc, &args.name)?;
-            let frames = services
-                .frames
-                .subscriber_builder()
-                .create()
-                .map_err(|e| anyhow::anyhow!("camera {}: cannot subscribe to frames: {e:?}", args.name))?;
+            let frames = services.frame_subscriber()?;
             let objects = fusepose_scene::builtin::builtin_objects();
-            Some((frames, overlay::OverlayWriter::new(dir, objects, args.weights.as_deref())?))
+            let weights = crate::weights::resolve_weights(args.weights.as_deref())?;
+            Some((frames, overlay::OverlayWriter::new(dir, objects, Some(&weights))?))
         }
         None => None,
     };
@@ -208,5 +214,17 @@ mod tests {
         let (s30, c30) = (0.5, 0.75f64.sqrt());
         let r = rpy_from_quaternion([-h * s30, h * c30, h * s30, h * c30]);
         assert!(close(r, [0.0, std::f64::consts::FRAC_PI_2, std::f64::consts::FRAC_PI_3]), "{r:?}");
+    }
+
+    #[test]
+    fn json_writes_unverified_scores_as_null() {
+        let o = WireObjectPose { flags: 2, fit_score: f32::NAN, depth_residual_m: f32::NAN, ..Default::default() };
+        assert!(
+            json_object(&o).ends_with(r#""flags":2,"fit_score":null,"depth_residual_m":null}"#),
+            "{}",
+            json_object(&o)
+        );
+        let v = WireObjectPose { flags: 1, fit_score: 0.875, depth_residual_m: 0.0015, ..o };
+        assert!(json_object(&v).ends_with(r#""flags":1,"fit_score":0.8750,"depth_residual_m":0.001500}"#));
     }
 }

@@ -30,7 +30,7 @@ extern "C" {
 #endif
 
 /* Version of every wire type; bumped on any layout change. */
-#define FUSEPOSE_WIRE_VERSION 2
+#define FUSEPOSE_WIRE_VERSION 3
 /* b"FPFR" read as a little-endian u32: first field of every frame header. */
 #define FUSEPOSE_FRAME_MAGIC 0x52465046u
 /* Most object poses in one pose message. */
@@ -41,7 +41,7 @@ extern "C" {
 #define FUSEPOSE_STAGE_COUNT 6
 #define FUSEPOSE_TIMELINE_COUNT 7
 /* Number of invalid-frame reason codes (size of fp_stats_snapshot.invalid_by_reason). */
-#define FUSEPOSE_INVALID_REASON_COUNT 23
+#define FUSEPOSE_INVALID_REASON_COUNT 29
 
 /* fp_frame_header.color_format */
 #define FUSEPOSE_COLOR_RGB8 1
@@ -49,9 +49,12 @@ extern "C" {
 /* fp_frame_header.depth_format: u16 units times depth_scale metres, or f32 metres; 0 = no reading. */
 #define FUSEPOSE_DEPTH_U16 1
 #define FUSEPOSE_DEPTH_F32 2
-/* fp_frame_header.label_format: per-pixel class id, 0 = background. */
+/* fp_frame_header.label_format: per-pixel class id (1, 2) or instance id (3), 0 = background.
+ * With FUSEPOSE_LABELS_INSTANCE_U16, fp_frame_header.instance_classes holds instance_count + 1
+ * uint16_t class ids, entry [id] the class of instance id (entry 0 unused, write 0). */
 #define FUSEPOSE_LABELS_U8 1
 #define FUSEPOSE_LABELS_U16 2
+#define FUSEPOSE_LABELS_INSTANCE_U16 3
 
 /* fp_pose_message.status bits */
 #define FUSEPOSE_STATUS_OK (1u << 0)
@@ -59,6 +62,10 @@ extern "C" {
 #define FUSEPOSE_STATUS_DEADLINE_MISSED (1u << 2)
 #define FUSEPOSE_STATUS_DEGRADED (1u << 3)
 #define FUSEPOSE_STATUS_ESTIMATOR_FAILED (1u << 4)
+
+/* fp_object_pose.flags bits (the others are 0) */
+#define FUSEPOSE_POSE_VERIFIED (1u << 0)              /* passed verification (scores are NaN when it did not run) */
+#define FUSEPOSE_POSE_FROM_INSTANCE_LABELS (1u << 1)  /* mask from the frame's own instance-label plane */
 
 /* Stage indices into stage_ns and the stats arrays (end-to-end is index 6 in stats). */
 #define FUSEPOSE_STAGE_INGEST 0
@@ -70,8 +77,8 @@ extern "C" {
 
 /* Where one plane lies in the frame payload, bytes from the payload start. */
 typedef struct fp_plane_ref {
-    uint64_t offset;
-    uint64_t len;
+    uint32_t offset;
+    uint32_t len;
 } fp_plane_ref;
 
 /* User header of every frame sample (128 bytes, no padding). */
@@ -86,8 +93,9 @@ typedef struct fp_frame_header {
     uint8_t color_format;     /* FUSEPOSE_COLOR_* */
     uint8_t depth_format;     /* FUSEPOSE_DEPTH_* */
     uint8_t has_labels;       /* 1 when a label plane is present */
-    uint8_t label_format;     /* FUSEPOSE_LABELS_* (ignored without labels) */
-    uint32_t _reserved;
+    uint8_t label_format;     /* FUSEPOSE_LABELS_* (ignored without labels; 3 needs has_labels = 1) */
+    uint16_t instance_count;  /* label format 3: instance ids 1..instance_count; else 0 */
+    uint16_t _reserved;       /* write 0 */
     uint64_t sequence;        /* producer frame counter, +1 per frame */
     uint64_t capture_time_ns; /* CLOCK_MONOTONIC ns */
     double fx;                /* pinhole intrinsics, pixels; pixel centres at integers */
@@ -96,23 +104,27 @@ typedef struct fp_frame_header {
     double cy;
     fp_plane_ref color;
     fp_plane_ref depth;
-    fp_plane_ref labels;
+    fp_plane_ref labels;           /* class ids, or instance ids (format 3); empty without labels */
+    fp_plane_ref instance_classes; /* format 3: instance_count + 1 uint16_t class ids; else empty */
+    uint8_t _reserved_end[16];     /* write 0 */
 } fp_frame_header;
 
-/* One object's pose in the camera optical frame (80 bytes, no padding). */
+/* One object's pose in the camera optical frame (88 bytes, no padding). */
 typedef struct fp_object_pose {
     uint16_t class_id;          /* 1-based class id in the daemon's object set */
-    uint16_t instance_id;       /* instance index within the frame */
+    uint16_t instance_id;       /* 0-based index among this frame's instances, largest mask first; not stable */
     uint16_t refine_iterations; /* ICP or refiner iterations */
-    uint16_t _reserved;
+    uint16_t flags;             /* FUSEPOSE_POSE_* bits */
     float confidence;           /* 0..1 */
     uint32_t mask_pixels;       /* pixels of the instance mask */
     uint16_t bbox[4];           /* u_min, v_min, u_max, v_max, inclusive, pixels */
     double quaternion[4];       /* rotation object -> camera, unit, [x, y, z, w] */
     double translation_m[3];    /* translation object -> camera, metres */
+    float fit_score;            /* 0..1, how well the pose explains depth and mask; NaN = not verified */
+    float depth_residual_m;     /* median |depth residual| of the visible surface, metres; NaN = not verified */
 } fp_object_pose;
 
-/* The poses of one frame (2656 bytes). */
+/* The poses of one frame (2912 bytes). */
 typedef struct fp_pose_message {
     uint16_t format_version;    /* FUSEPOSE_WIRE_VERSION */
     uint16_t object_count;      /* valid entries at the start of objects[] */

@@ -101,16 +101,8 @@ impl Consumer {
     /// Subscribes to the poses of camera `camera` (the daemon need not run yet).
     pub fn open(ipc: &Ipc, camera: &str) -> Result<Self, ClientError> {
         let services = CameraServices::open(ipc, camera)?;
-        let subscriber = services.poses.subscriber_builder().create().map_err(|e| ClientError::Port {
-            service: services.poses_name.clone(),
-            port: "subscriber",
-            detail: format!("{e:?}"),
-        })?;
-        let listener = services.pose_events.listener_builder().create().map_err(|e| ClientError::Port {
-            service: services.poses_name.clone(),
-            port: "listener",
-            detail: format!("{e:?}"),
-        })?;
+        let subscriber = services.pose_subscriber()?;
+        let listener = services.pose_listener()?;
         Ok(Self {
             services,
             subscriber,
@@ -140,11 +132,10 @@ impl Consumer {
     pub fn latest(&mut self) -> Result<Option<PoseMessage>, ClientError> {
         let mut newest = None;
         loop {
-            let received = self.subscriber.receive().map_err(|e| ClientError::Transfer {
-                service: self.services.poses_name.clone(),
-                operation: "receive",
-                detail: format!("{e:?}"),
-            })?;
+            let received = self
+                .subscriber
+                .receive()
+                .map_err(|e| ClientError::transfer(&self.services.poses_name, "receive", &e))?;
             let Some(sample) = received else { break };
             let msg = *sample.payload();
             if msg.format_version != WIRE_VERSION {
@@ -163,11 +154,9 @@ impl Consumer {
     /// Every pose message received since the last call, oldest first (at most
     /// the subscriber buffer; older ones were overwritten).
     pub fn drain(&mut self, out: &mut Vec<PoseMessage>) -> Result<(), ClientError> {
-        while let Some(sample) = self.subscriber.receive().map_err(|e| ClientError::Transfer {
-            service: self.services.poses_name.clone(),
-            operation: "receive",
-            detail: format!("{e:?}"),
-        })? {
+        while let Some(sample) =
+            self.subscriber.receive().map_err(|e| ClientError::transfer(&self.services.poses_name, "receive", &e))?
+        {
             out.push(*sample.payload());
         }
         Ok(())
@@ -200,22 +189,18 @@ pub struct StatsClient {
 impl StatsClient {
     pub fn open(ipc: &Ipc, camera: &str) -> Result<Self, ClientError> {
         let services = CameraServices::open(ipc, camera)?;
-        let client = services.stats.client_builder().create().map_err(|e| ClientError::Port {
-            service: services.stats_name.clone(),
-            port: "client",
-            detail: format!("{e:?}"),
-        })?;
+        let client = services.stats_client()?;
         Ok(Self { services, client })
     }
 
     /// Sends one request and waits up to `timeout` for the snapshot.
     pub fn query(&self, timeout: Duration) -> Result<StatsSnapshot, ClientError> {
         let service = &self.services.stats_name;
-        let transfer = |operation, e: String| ClientError::Transfer { service: service.clone(), operation, detail: e };
         let deadline = Instant::now() + timeout;
-        let pending = self.client.send_copy(StatsRequest::default()).map_err(|e| transfer("send", format!("{e:?}")))?;
+        let pending =
+            self.client.send_copy(StatsRequest::default()).map_err(|e| ClientError::transfer(service, "send", &e))?;
         loop {
-            if let Some(response) = pending.receive().map_err(|e| transfer("receive", format!("{e:?}")))? {
+            if let Some(response) = pending.receive().map_err(|e| ClientError::transfer(service, "receive", &e))? {
                 let snapshot = *response.payload();
                 if snapshot.format_version != WIRE_VERSION {
                     return Err(ClientError::MessageVersionMismatch {

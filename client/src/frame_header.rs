@@ -1,5 +1,6 @@
 //! Frame wire format: the `#[repr(C)]` header in front of the RGB, depth and
-//! optional label planes of one `[u8]` payload, and the producer-side layout.
+//! optional label planes of one `[u8]` payload (class ids, or instance ids
+//! plus an instance → class table), and the producer-side layout.
 //!
 //! Format codes are stored as raw integers (never Rust enums) so that any byte
 //! pattern another process writes is a valid header that validation can reject.
@@ -32,12 +33,28 @@ pub enum DepthFormat {
     F32 = 2,
 }
 
-/// Label plane encoding: per-pixel class id, 0 = background.
+/// Label plane encoding.
+///
+/// `U8` and `U16` carry a class id per pixel (0 = background). `InstanceU16`
+/// carries an instance id per pixel (u16, 0 = background) plus the instance
+/// class table, a plane of `max_instances + 1` u16 entries where entry `id` is
+/// the class id of instance `id` (entry 0 unused, write 0).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum LabelFormat {
-    U8 = 1,
-    U16 = 2,
+    U8,
+    U16,
+    /// Instance ids 1..=`max_instances` per pixel, and their classes in the table.
+    InstanceU16 {
+        max_instances: u16,
+    },
 }
+
+/// `label_format` code of [`LabelFormat::U8`].
+pub const LABELS_U8: u8 = 1;
+/// `label_format` code of [`LabelFormat::U16`].
+pub const LABELS_U16: u8 = 2;
+/// `label_format` code of [`LabelFormat::InstanceU16`].
+pub const LABELS_INSTANCE_U16: u8 = 3;
 
 impl ColorFormat {
     pub fn from_code(code: u8) -> Option<Self> {
@@ -67,32 +84,64 @@ impl DepthFormat {
 }
 
 impl LabelFormat {
-    pub fn from_code(code: u8) -> Option<Self> {
+    /// The format of header code `code`; `instance_count` (the header field)
+    /// sizes the instance class table of code 3.
+    pub fn from_code(code: u8, instance_count: u16) -> Option<Self> {
         match code {
-            1 => Some(Self::U8),
-            2 => Some(Self::U16),
+            LABELS_U8 => Some(Self::U8),
+            LABELS_U16 => Some(Self::U16),
+            LABELS_INSTANCE_U16 => Some(Self::InstanceU16 { max_instances: instance_count }),
             _ => None,
         }
     }
+
+    /// The header's `label_format` code.
+    pub fn code(self) -> u8 {
+        match self {
+            Self::U8 => LABELS_U8,
+            Self::U16 => LABELS_U16,
+            Self::InstanceU16 { .. } => LABELS_INSTANCE_U16,
+        }
+    }
+
     /// Bytes per label value.
     pub fn bytes_per_pixel(self) -> usize {
         match self {
             Self::U8 => 1,
-            Self::U16 => 2,
+            Self::U16 | Self::InstanceU16 { .. } => 2,
+        }
+    }
+
+    /// Entries of the instance class table (`max_instances + 1`; 0 for class-id formats).
+    pub fn instance_table_entries(self) -> usize {
+        match self {
+            Self::InstanceU16 { max_instances } => max_instances as usize + 1,
+            Self::U8 | Self::U16 => 0,
         }
     }
 }
 
 /// Where one plane lies in the payload, in bytes from the payload start.
+///
+/// u32 is enough: the largest frame (4096² pixels, RGB8 + f32 depth + u16
+/// labels + a full instance class table) is about 151 MB.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq, ZeroCopySend)]
 #[type_name("fusepose::PlaneRef")]
 pub struct PlaneRef {
-    pub offset: u64,
-    pub len: u64,
+    pub offset: u32,
+    pub len: u32,
 }
 
-/// The user header of every frame sample (128 bytes, no padding).
+impl PlaneRef {
+    /// One past the last byte (no overflow: computed in u64).
+    pub fn end(&self) -> u64 {
+        self.offset as u64 + self.len as u64
+    }
+}
+
+/// The user header of every frame sample (128 bytes, no padding; offsets in
+/// `docs/PROTOCOL.md`, "Frames").
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("fusepose::FrameHeader")]
@@ -115,9 +164,13 @@ pub struct FrameHeader {
     pub depth_format: u8,
     /// 1 when a label plane is present, else 0.
     pub has_labels: u8,
-    /// [`LabelFormat`] code (ignored without labels).
+    /// [`LabelFormat`] code (ignored without labels, except that 3 needs `has_labels = 1`).
     pub label_format: u8,
-    pub _reserved: u32,
+    /// Label format 3: instance ids run 1..=`instance_count` and the instance
+    /// class table has `instance_count + 1` entries. 0 for every other format.
+    pub instance_count: u16,
+    /// Write 0 (not checked).
+    pub _reserved: u16,
     /// Producer's frame counter, +1 per frame; gaps mean frames the producer dropped.
     pub sequence: u64,
     /// When the image was captured, `CLOCK_MONOTONIC` ns.
@@ -129,7 +182,13 @@ pub struct FrameHeader {
     pub cy: f64,
     pub color: PlaneRef,
     pub depth: PlaneRef,
+    /// Class ids (formats 1, 2) or instance ids (format 3); empty without labels.
     pub labels: PlaneRef,
+    /// Label format 3: u16 class id per instance id (`instance_count + 1`
+    /// entries, entry 0 unused); empty for every other format.
+    pub instance_classes: PlaneRef,
+    /// Write 0 (not checked).
+    pub _reserved_end: [u8; 16],
 }
 
 const _: () = assert!(core::mem::size_of::<FrameHeader>() == 128);
@@ -148,6 +207,11 @@ pub struct FrameLayout {
 
 fn align8(n: u64) -> u64 {
     n.div_ceil(8) * 8
+}
+
+/// A plane of `len` bytes (at most ~151 MB for a valid layout, see [`PlaneRef`]).
+fn plane(offset: u64, len: u64) -> PlaneRef {
+    PlaneRef { offset: offset as u32, len: len as u32 }
 }
 
 impl FrameLayout {
@@ -169,22 +233,30 @@ impl FrameLayout {
 
     /// Colour, depth and label planes (label plane empty without labels), each 8-byte aligned.
     pub fn planes(&self) -> [PlaneRef; 3] {
-        let color = PlaneRef { offset: 0, len: self.pixels() * 3 };
-        let depth =
-            PlaneRef { offset: align8(color.len), len: self.pixels() * self.depth_format.bytes_per_pixel() as u64 };
+        let color = plane(0, self.pixels() * 3);
+        let depth = plane(align8(color.end()), self.pixels() * self.depth_format.bytes_per_pixel() as u64);
         let labels = match self.labels {
-            Some(f) => {
-                PlaneRef { offset: align8(depth.offset + depth.len), len: self.pixels() * f.bytes_per_pixel() as u64 }
-            }
+            Some(f) => plane(align8(depth.end()), self.pixels() * f.bytes_per_pixel() as u64),
             None => PlaneRef::default(),
         };
         [color, depth, labels]
     }
 
+    /// The instance class table, after the label plane at the next multiple of
+    /// 8 (empty unless the labels are [`LabelFormat::InstanceU16`]).
+    pub fn instance_classes(&self) -> PlaneRef {
+        match self.labels {
+            Some(f @ LabelFormat::InstanceU16 { .. }) => {
+                plane(align8(self.planes()[2].end()), f.instance_table_entries() as u64 * 2)
+            }
+            _ => PlaneRef::default(),
+        }
+    }
+
     /// Bytes of payload one frame needs.
     pub fn payload_len(&self) -> usize {
         let [_, depth, labels] = self.planes();
-        (depth.offset + depth.len).max(labels.offset + labels.len) as usize
+        depth.end().max(labels.end()).max(self.instance_classes().end()) as usize
     }
 
     /// Checks the size and scale a producer asks for.
@@ -215,10 +287,15 @@ impl FrameLayout {
             color_format: self.color_format as u8,
             depth_format: self.depth_format as u8,
             has_labels: self.labels.is_some() as u8,
-            label_format: self.labels.map_or(0, |f| f as u8),
+            label_format: self.labels.map_or(0, LabelFormat::code),
+            instance_count: match self.labels {
+                Some(LabelFormat::InstanceU16 { max_instances }) => max_instances,
+                _ => 0,
+            },
             color,
             depth,
             labels,
+            instance_classes: self.instance_classes(),
             ..FrameHeader::default()
         }
     }
@@ -236,8 +313,8 @@ mod tests {
         assert_eq!(c.len, 640 * 480 * 3);
         assert_eq!(d.offset % 8, 0);
         assert_eq!(d.len, 640 * 480 * 2);
-        assert!(l.offset >= d.offset + d.len && l.offset % 8 == 0);
-        assert_eq!(layout.payload_len() as u64, l.offset + l.len);
+        assert!(l.offset as u64 >= d.end() && l.offset % 8 == 0);
+        assert_eq!(layout.payload_len() as u64, l.end());
     }
 
     #[test]
@@ -247,5 +324,46 @@ mod tests {
         assert_eq!(c.len, 9);
         assert_eq!(d.offset, 16);
         assert_eq!(layout.payload_len(), 22);
+    }
+
+    #[test]
+    fn instance_layout_puts_the_class_table_after_the_ids() {
+        let layout = FrameLayout {
+            width: 5,
+            height: 3,
+            labels: Some(LabelFormat::InstanceU16 { max_instances: 4 }),
+            ..FrameLayout::vga_rgbd()
+        };
+        let [c, d, l] = layout.planes();
+        let t = layout.instance_classes();
+        assert_eq!((c.offset, c.len, d.offset, d.len), (0, 45, 48, 30));
+        assert_eq!((l.offset, l.len), (80, 30));
+        // 5 entries (ids 0..=4) at the next multiple of 8 after the id plane.
+        assert_eq!((t.offset, t.len), (112, 10));
+        assert_eq!(layout.payload_len(), 122);
+        let h = layout.header(1);
+        assert_eq!((h.has_labels, h.label_format, h.instance_count), (1, 3, 4));
+        assert_eq!((h.labels, h.instance_classes), (l, t));
+        // Class-id layouts have no table.
+        let classes = FrameLayout { labels: Some(LabelFormat::U16), ..layout };
+        assert_eq!(classes.instance_classes(), PlaneRef::default());
+        assert_eq!(classes.header(1).instance_count, 0);
+        assert_eq!(LabelFormat::from_code(3, 4), layout.labels);
+        assert_eq!(LabelFormat::from_code(4, 0), None);
+    }
+
+    #[test]
+    fn header_offsets_are_the_documented_ones() {
+        use core::mem::offset_of;
+        assert_eq!(offset_of!(FrameHeader, label_format), 27);
+        assert_eq!(offset_of!(FrameHeader, instance_count), 28);
+        assert_eq!(offset_of!(FrameHeader, _reserved), 30);
+        assert_eq!(offset_of!(FrameHeader, sequence), 32);
+        assert_eq!(offset_of!(FrameHeader, fx), 48);
+        assert_eq!(offset_of!(FrameHeader, color), 80);
+        assert_eq!(offset_of!(FrameHeader, depth), 88);
+        assert_eq!(offset_of!(FrameHeader, labels), 96);
+        assert_eq!(offset_of!(FrameHeader, instance_classes), 104);
+        assert_eq!(offset_of!(FrameHeader, _reserved_end), 112);
     }
 }

@@ -25,18 +25,84 @@ mod stats;
 pub use arrival::{ArrivalPredictor, WaitPlan, WaitStrategy, poll_until};
 pub use clock::monotonic_ns;
 pub use consumer::{Consumer, StatsClient, wait_for_samples};
-pub use error::ClientError;
+pub use error::{CapacityLimit, ClientError};
 pub use frame_decode::{DepthData, FramePlanes, FrameRejection, LabelData, decode_frame};
 pub use frame_header::{
-    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LabelFormat, MAX_IMAGE_SIDE,
-    PlaneRef,
+    ColorFormat, DepthFormat, FOCAL_RANGE_PX, FRAME_MAGIC, FrameHeader, FrameLayout, LABELS_INSTANCE_U16, LABELS_U8,
+    LABELS_U16, LabelFormat, MAX_IMAGE_SIDE, PlaneRef,
 };
 pub use ipc_context::{Ipc, IpcOptions};
-pub use pose_message::{InvalidReason, MAX_OBJECTS, PoseMessage, PoseStatus, WireObjectPose};
+pub use pose_message::{InvalidReason, MAX_OBJECTS, PoseFlags, PoseMessage, PoseStatus, WireObjectPose};
 pub use producer::{DepthMut, FrameWriter, LabelsMut, PlanesMut, Producer};
-pub use services::{CameraServices, camera_id, validate_camera_name};
+pub use services::{CameraServices, camera_id, limits, validate_camera_name};
 pub use stats::{LatencySummary, STAGE_COUNT, Stage, StatsRequest, StatsSnapshot, TIMELINE_COUNT};
 
 /// Version of every wire type in this crate. Bumped on any layout change;
 /// checked in each message and as a service attribute when opening services.
-pub const WIRE_VERSION: u16 = 2;
+///
+/// 3: instance-label frames (label format 3 + instance class table, 32-bit
+/// plane references), pose verification fields and flags, reasons 23–28.
+pub const WIRE_VERSION: u16 = 3;
+
+#[cfg(test)]
+mod tests {
+    use iceoryx2::prelude::*;
+    use iceoryx2::service::attribute::{AttributeKey, AttributeSpecifier, AttributeValue};
+
+    use super::*;
+
+    /// A pose message as wire version 2 laid it out (2656 bytes, same type name).
+    #[repr(C)]
+    #[derive(Debug, ZeroCopySend)]
+    #[type_name("fusepose::PoseMessage")]
+    struct PoseMessageV2 {
+        bytes: [u64; 332],
+    }
+
+    /// A peer of wire version 2 created one of the camera's services first: a
+    /// version-3 process gets the version error naming the service (not an
+    /// iceoryx2 type or attribute detail), whichever service that peer opened.
+    #[test]
+    fn services_of_an_older_wire_version_are_refused_by_name() {
+        let dir = tempfile::tempdir().unwrap();
+        let prefix = format!("fpv{}_", std::process::id());
+        let options =
+            IpcOptions { root_path: Some(dir.path().to_owned()), prefix: Some(prefix.clone()), ..Default::default() };
+        let ipc = Ipc::new(&options).unwrap();
+        let key = AttributeKey::new(b"fusepose.wire_version").unwrap();
+        let v2 = AttributeSpecifier::new().define(&key, &AttributeValue::new(b"2").unwrap()).unwrap();
+        let name = |s: &str| ServiceName::new(s).unwrap();
+
+        // A version-2 process: its frame header is 128 bytes too, so only the attribute differs.
+        let _frames = ipc
+            .node()
+            .service_builder(&name("fusepose/camera/old/frames"))
+            .publish_subscribe::<[u8]>()
+            .user_header::<FrameHeader>()
+            .create_with_attributes(&v2)
+            .unwrap();
+        // A version-2 C consumer that opened only the poses service: there the payload size differs too.
+        let _poses = ipc
+            .node()
+            .service_builder(&name("fusepose/camera/oldc/poses"))
+            .publish_subscribe::<PoseMessageV2>()
+            .create_with_attributes(&v2)
+            .unwrap();
+
+        for (camera, service) in [("old", "fusepose/camera/old/frames"), ("oldc", "fusepose/camera/oldc/poses")] {
+            match CameraServices::open(&ipc, camera) {
+                Err(ClientError::WireVersionMismatch { service: s, ours }) => {
+                    assert_eq!((s.as_str(), ours), (service, WIRE_VERSION))
+                }
+                Err(e) => panic!("camera {camera}: expected a wire version mismatch, got {e}"),
+                Ok(_) => panic!("camera {camera}: a version-2 service was opened"),
+            }
+        }
+        drop(ipc);
+        for entry in std::fs::read_dir("/dev/shm").into_iter().flatten().flatten() {
+            if entry.file_name().to_string_lossy().starts_with(&prefix) {
+                let _ = std::fs::remove_file(entry.path());
+            }
+        }
+    }
+}

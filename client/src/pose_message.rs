@@ -5,18 +5,22 @@ use iceoryx2::prelude::ZeroCopySend;
 /// Most object poses one message carries.
 pub const MAX_OBJECTS: usize = 32;
 
-/// One object's pose in the camera optical frame (80 bytes, no padding).
+/// One object's pose in the camera optical frame (88 bytes, no padding).
+///
+/// Entries of [`PoseMessage::objects`] beyond `object_count` are all zero.
 #[repr(C)]
 #[derive(Clone, Copy, Debug, Default, PartialEq, ZeroCopySend)]
 #[type_name("fusepose::WireObjectPose")]
 pub struct WireObjectPose {
     /// Class id in the daemon's object set (1-based).
     pub class_id: u16,
-    /// Instance index within the frame.
+    /// Index of the instance among this frame's instances (0-based, largest
+    /// mask first); not stable from frame to frame. See `docs/PROTOCOL.md`, "Poses".
     pub instance_id: u16,
     /// ICP iterations, or refiner iterations of the network.
     pub refine_iterations: u16,
-    pub _reserved: u16,
+    /// [`PoseFlags`] bits.
+    pub flags: u16,
     /// Estimator confidence in [0, 1].
     pub confidence: f32,
     /// Pixels of the instance mask.
@@ -27,9 +31,35 @@ pub struct WireObjectPose {
     pub quaternion: [f64; 4],
     /// Translation object → camera, metres.
     pub translation_m: [f64; 3],
+    /// How well the pose explains the observed depth and mask, 0..1 (1 =
+    /// perfectly); NaN when the pose was not verified.
+    pub fit_score: f32,
+    /// Median absolute depth residual over the visible model surface, metres;
+    /// NaN when the pose was not verified.
+    pub depth_residual_m: f32,
 }
 
-const _: () = assert!(core::mem::size_of::<WireObjectPose>() == 80);
+const _: () = assert!(core::mem::size_of::<WireObjectPose>() == 88);
+const _: () = assert!(core::mem::align_of::<WireObjectPose>() == 8);
+
+/// Bits of [`WireObjectPose::flags`] (the other bits are 0).
+pub struct PoseFlags;
+
+impl PoseFlags {
+    /// The pose passed the daemon's verification. (`fit_score` and
+    /// `depth_residual_m` hold the result whenever verification ran, passed
+    /// or not; NaN when it did not run.)
+    pub const VERIFIED: u16 = 1 << 0;
+    /// The object's mask came from the frame's own instance-label plane
+    /// (label format 3), not from class labels or the built-in segmenter.
+    pub const FROM_INSTANCE_LABELS: u16 = 1 << 1;
+}
+
+impl WireObjectPose {
+    pub fn is_verified(&self) -> bool {
+        self.flags & PoseFlags::VERIFIED != 0
+    }
+}
 
 /// Bits of [`PoseMessage::status`].
 pub struct PoseStatus;
@@ -89,11 +119,25 @@ pub enum InvalidReason {
     CaptureInFuture = 21,
     /// Capture time too far in the past to be worth a pose.
     CaptureTooOld = 22,
+    /// Label format 3 (instance ids) without an instance class table.
+    InstanceTableMissing = 23,
+    /// The instance class table is not `instance_count + 1` u16 entries long.
+    InstanceTableLength = 24,
+    /// The instance class table starts at an odd offset.
+    InstanceTableMisaligned = 25,
+    /// Label format 3 with `has_labels = 0`, or an instance count / class
+    /// table on a frame without instance labels.
+    InstanceLabelsInconsistent = 26,
+    /// A pixel's instance id is larger than `instance_count` (no table entry).
+    InstanceBeyondTable = 27,
+    /// An instance in the plane has class 0 or a class id larger than the
+    /// daemon's number of object classes.
+    InstanceClassUnknown = 28,
 }
 
 impl InvalidReason {
     /// Number of codes (size of per-reason counters).
-    pub const COUNT: usize = 23;
+    pub const COUNT: usize = 29;
 
     pub const ALL: [InvalidReason; Self::COUNT] = [
         Self::None,
@@ -119,6 +163,12 @@ impl InvalidReason {
         Self::SequenceRegression,
         Self::CaptureInFuture,
         Self::CaptureTooOld,
+        Self::InstanceTableMissing,
+        Self::InstanceTableLength,
+        Self::InstanceTableMisaligned,
+        Self::InstanceLabelsInconsistent,
+        Self::InstanceBeyondTable,
+        Self::InstanceClassUnknown,
     ];
 
     pub fn from_code(code: u32) -> Option<Self> {
@@ -151,6 +201,12 @@ impl InvalidReason {
             Self::SequenceRegression => "sequence_regression",
             Self::CaptureInFuture => "capture_in_future",
             Self::CaptureTooOld => "capture_too_old",
+            Self::InstanceTableMissing => "instance_table_missing",
+            Self::InstanceTableLength => "instance_table_length",
+            Self::InstanceTableMisaligned => "instance_table_misaligned",
+            Self::InstanceLabelsInconsistent => "instance_labels_inconsistent",
+            Self::InstanceBeyondTable => "instance_beyond_table",
+            Self::InstanceClassUnknown => "instance_class_unknown",
         }
     }
 }
@@ -182,7 +238,7 @@ pub struct PoseMessage {
     pub objects: [WireObjectPose; MAX_OBJECTS],
 }
 
-const _: () = assert!(core::mem::size_of::<PoseMessage>() == 2656);
+const _: () = assert!(core::mem::size_of::<PoseMessage>() == 2912);
 
 impl Default for PoseMessage {
     fn default() -> Self {
@@ -240,6 +296,26 @@ mod tests {
         names.sort();
         names.dedup();
         assert_eq!(names.len(), InvalidReason::COUNT, "reason names must be distinct");
+        // Codes are positions in ALL: appended, never renumbered.
+        for (i, r) in InvalidReason::ALL.iter().enumerate() {
+            assert_eq!(*r as usize, i);
+        }
+        assert_eq!(InvalidReason::CaptureTooOld as u32, 22);
+        assert_eq!(InvalidReason::InstanceClassUnknown as u32, 28);
+    }
+
+    #[test]
+    fn object_pose_layout_has_the_verification_fields_last() {
+        use core::mem::offset_of;
+        assert_eq!(offset_of!(WireObjectPose, flags), 6);
+        assert_eq!(offset_of!(WireObjectPose, quaternion), 24);
+        assert_eq!(offset_of!(WireObjectPose, translation_m), 56);
+        assert_eq!(offset_of!(WireObjectPose, fit_score), 80);
+        assert_eq!(offset_of!(WireObjectPose, depth_residual_m), 84);
+        assert_eq!(offset_of!(PoseMessage, objects), 96);
+        let p = WireObjectPose { flags: PoseFlags::VERIFIED | PoseFlags::FROM_INSTANCE_LABELS, ..Default::default() };
+        assert!(p.is_verified());
+        assert!(!WireObjectPose::default().is_verified());
     }
 
     #[test]

@@ -27,8 +27,14 @@ pub enum DepthMut<'a> {
 
 /// Mutable label plane of a loaned frame.
 pub enum LabelsMut<'a> {
+    /// Class ids (0 = background).
     U8(&'a mut [u8]),
+    /// Class ids (0 = background).
     U16(&'a mut [u16]),
+    /// [`LabelFormat::InstanceU16`]: an instance id per pixel (0 = background,
+    /// else 1..=`max_instances`) and the class of each instance: set
+    /// `classes[id]` for every id in use (entry 0 is unused; write 0).
+    Instances { ids: &'a mut [u16], classes: &'a mut [u16] },
 }
 
 /// All planes of a loaned frame at once (disjoint borrows).
@@ -51,23 +57,8 @@ impl Producer {
     pub fn create(ipc: &Ipc, camera: &str, layout: FrameLayout) -> Result<Self, ClientError> {
         layout.validate().map_err(ClientError::Layout)?;
         let services = CameraServices::open(ipc, camera)?;
-        let publisher = services
-            .frames
-            .publisher_builder()
-            .initial_max_slice_len(layout.payload_len())
-            .allocation_strategy(AllocationStrategy::Static)
-            .max_loaned_samples(2)
-            .create()
-            .map_err(|e| ClientError::Port {
-                service: services.frames_name.clone(),
-                port: "publisher",
-                detail: format!("{e:?}"),
-            })?;
-        let notifier = services.frame_events.notifier_builder().create().map_err(|e| ClientError::Port {
-            service: services.frames_name.clone(),
-            port: "notifier",
-            detail: format!("{e:?}"),
-        })?;
+        let publisher = services.frame_publisher(layout.payload_len())?;
+        let notifier = services.frame_notifier()?;
         Ok(Self { services, publisher, notifier, layout, next_sequence: 0 })
     }
 
@@ -92,12 +83,10 @@ impl Producer {
     /// Loans the next frame in shared memory; the header is filled from the
     /// layout, the sequence and the current time (override with the setters).
     pub fn loan(&mut self) -> Result<FrameWriter<'_>, ClientError> {
-        let mut sample =
-            self.publisher.loan_slice_uninit(self.layout.payload_len()).map_err(|e| ClientError::Transfer {
-                service: self.services.frames_name.clone(),
-                operation: "loan",
-                detail: format!("{e:?}"),
-            })?;
+        let mut sample = self
+            .publisher
+            .loan_slice_uninit(self.layout.payload_len())
+            .map_err(|e| ClientError::transfer(&self.services.frames_name, "loan", &e))?;
         let mut header = self.layout.header(self.services.camera_id);
         header.sequence = self.next_sequence;
         header.capture_time_ns = monotonic_ns();
@@ -116,11 +105,8 @@ impl Producer {
                 self.layout.payload_len()
             )));
         }
-        let mut sample = self.publisher.loan_slice_uninit(payload.len()).map_err(|e| ClientError::Transfer {
-            service: service.clone(),
-            operation: "loan",
-            detail: format!("{e:?}"),
-        })?;
+        let mut sample =
+            self.publisher.loan_slice_uninit(payload.len()).map_err(|e| ClientError::transfer(service, "loan", &e))?;
         *sample.user_header_mut() = header;
         let sample = sample.write_from_slice(payload);
         sample.send().map_err(|e| ClientError::Transfer {
@@ -178,10 +164,12 @@ impl FrameWriter<'_> {
         unsafe { core::slice::from_raw_parts_mut(payload.as_mut_ptr().cast::<u8>(), payload.len()) }
     }
 
-    /// Mutable views of the colour, depth and (when the layout has them) label planes.
+    /// Mutable views of the colour, depth and (when the layout has them) label
+    /// planes; with instance labels also the instance class table.
     pub fn planes_mut(&mut self) -> PlanesMut<'_> {
         let layout = self.producer.layout;
         let [color, depth, labels] = layout.planes();
+        let table = layout.instance_classes();
         let bytes = self.payload_bytes();
         let (head, rest) = bytes.split_at_mut(depth.offset as usize);
         let color_plane = &mut head[..color.len as usize];
@@ -191,11 +179,16 @@ impl FrameWriter<'_> {
             DepthFormat::F32 => DepthMut::F32(cast_mut(depth_bytes)),
         };
         let label_plane = layout.labels.map(|format| {
-            let start = (labels.offset - depth.offset - depth.len) as usize;
-            let label_bytes = &mut tail[start..start + labels.len as usize];
+            let start = (labels.offset as u64 - depth.end()) as usize;
+            let (label_bytes, after) = tail[start..].split_at_mut(labels.len as usize);
             match format {
                 LabelFormat::U8 => LabelsMut::U8(label_bytes),
                 LabelFormat::U16 => LabelsMut::U16(cast_mut(label_bytes)),
+                LabelFormat::InstanceU16 { .. } => {
+                    let start = (table.offset as u64 - labels.end()) as usize;
+                    let classes = &mut after[start..start + table.len as usize];
+                    LabelsMut::Instances { ids: cast_mut(label_bytes), classes: cast_mut(classes) }
+                }
             }
         });
         PlanesMut { color: color_plane, depth: depth_plane, labels: label_plane }
@@ -205,10 +198,14 @@ impl FrameWriter<'_> {
     pub fn send(mut self) -> Result<u64, ClientError> {
         // Zero the padding between planes so no stale bytes travel.
         let [color, depth, labels] = self.producer.layout.planes();
+        let table = self.producer.layout.instance_classes();
         let bytes = self.payload_bytes();
         bytes[color.len as usize..depth.offset as usize].fill(0);
         if labels.len > 0 {
-            bytes[(depth.offset + depth.len) as usize..labels.offset as usize].fill(0);
+            bytes[depth.end() as usize..labels.offset as usize].fill(0);
+        }
+        if table.len > 0 {
+            bytes[labels.end() as usize..table.offset as usize].fill(0);
         }
         let sequence = self.sample.user_header().sequence;
         // SAFETY: see `payload_bytes`: the bytes are initialised.

@@ -1,12 +1,23 @@
-//! Service names and the one function that opens every fusepose service of a
-//! camera with identical options (iceoryx2 refuses to open a service with
-//! options other than those it was created with).
+//! Service names, the one function that opens every fusepose service of a
+//! camera with the same options, and the ports on them. The daemon creates
+//! the services; any process may come first (each opens or creates them with
+//! these options). Options given when opening an existing service are lower
+//! bounds that the service must meet (more than it was created with fails)
+//! and the overflow setting must match; [`limits`] holds every value, and
+//! docs/PROTOCOL.md lists them for clients in other languages. Limits reached
+//! come back as [`ClientError::Capacity`].
 //!
 //! Per camera `<name>`:
 //! - `fusepose/camera/<name>/frames`: publish-subscribe `[u8]` + [`FrameHeader`], and an event service of the same name (frame ready);
 //! - `fusepose/camera/<name>/poses`: publish-subscribe [`PoseMessage`], and an event service of the same name (poses ready);
 //! - `fusepose/camera/<name>/stats`: request-response [`StatsRequest`] → [`StatsSnapshot`].
 
+use iceoryx2::port::client::Client;
+use iceoryx2::port::listener::Listener;
+use iceoryx2::port::notifier::Notifier;
+use iceoryx2::port::publisher::Publisher;
+use iceoryx2::port::server::Server;
+use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::service::attribute::{AttributeKey, AttributeValue, AttributeVerifier};
 use iceoryx2::service::builder::event::EventOpenError;
@@ -17,8 +28,35 @@ use iceoryx2::service::port_factory::{event, publish_subscribe, request_response
 
 use crate::{ClientError, FrameHeader, Ipc, PoseMessage, StatsRequest, StatsSnapshot, WIRE_VERSION};
 
-/// Most nodes (processes) that may open one camera's services at once.
-const MAX_NODES: usize = 32;
+/// The settings every fusepose service is created with (docs/PROTOCOL.md, "Services").
+pub mod limits {
+    /// Most nodes (processes) that may open one service at once.
+    pub const MAX_NODES: usize = 32;
+    /// Frames: publishers (cameras), subscribers (the daemon and taps).
+    pub const FRAME_PUBLISHERS: usize = 2;
+    pub const FRAME_SUBSCRIBERS: usize = 3;
+    /// Frames: samples waiting per subscriber, and held at once (the daemon keeps the newest while draining).
+    pub const FRAME_BUFFER: usize = 2;
+    pub const FRAME_BORROWED: usize = 2;
+    /// Poses: publishers (the daemon; a second one only while a restart overlaps), subscribers (consumers).
+    pub const POSE_PUBLISHERS: usize = 2;
+    pub const POSE_SUBSCRIBERS: usize = 16;
+    pub const POSE_BUFFER: usize = 4;
+    pub const POSE_BORROWED: usize = 2;
+    /// The last pose message is replayed to a new subscriber.
+    pub const POSE_HISTORY: usize = 1;
+    /// Event services (frames ready, poses ready).
+    pub const EVENT_NOTIFIERS: usize = 8;
+    pub const EVENT_LISTENERS: usize = 24;
+    /// Stats: servers (the daemon), clients, requests in flight per client, answers buffered per request.
+    pub const STATS_SERVERS: usize = 2;
+    pub const STATS_CLIENTS: usize = 8;
+    pub const STATS_ACTIVE_REQUESTS: usize = 2;
+    pub const STATS_RESPONSE_BUFFER: usize = 2;
+    /// Frames a producer may have loaned and not sent.
+    pub const PUBLISHER_LOANS: usize = 2;
+}
+use limits::*;
 /// Attribute every fusepose service carries; opening checks it.
 const VERSION_ATTRIBUTE: &str = "fusepose.wire_version";
 
@@ -68,14 +106,19 @@ fn open_error(service: &str, detail: String, version_mismatch: bool) -> ClientEr
     if version_mismatch {
         ClientError::WireVersionMismatch { service: service.to_owned(), ours: WIRE_VERSION }
     } else {
-        ClientError::ServiceOpen { service: service.to_owned(), detail }
+        ClientError::capacity(service, &detail)
+            .unwrap_or_else(|| ClientError::ServiceOpen { service: service.to_owned(), detail })
     }
 }
 
 fn pubsub_error(service: &str, e: PublishSubscribeOpenOrCreateError) -> ClientError {
+    // Types are checked before attributes: a fusepose type name with another
+    // layout is another wire version too (e.g. a v2 pose message, 2656 bytes).
     let mismatch = matches!(
         e,
-        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(PublishSubscribeOpenError::IncompatibleAttributes)
+        PublishSubscribeOpenOrCreateError::PublishSubscribeOpenError(
+            PublishSubscribeOpenError::IncompatibleAttributes | PublishSubscribeOpenError::IncompatibleTypes
+        )
     );
     open_error(service, format!("{e:?}"), mismatch)
 }
@@ -88,7 +131,10 @@ fn event_error(service: &str, e: EventOpenOrCreateError) -> ClientError {
 fn request_response_error(service: &str, e: RequestResponseOpenOrCreateError) -> ClientError {
     let mismatch = matches!(
         e,
-        RequestResponseOpenOrCreateError::RequestResponseOpenError(RequestResponseOpenError::IncompatibleAttributes)
+        RequestResponseOpenOrCreateError::RequestResponseOpenError(
+            RequestResponseOpenError::IncompatibleAttributes
+                | RequestResponseOpenError::IncompatibleRequestOrResponseType
+        )
     );
     open_error(service, format!("{e:?}"), mismatch)
 }
@@ -97,8 +143,8 @@ fn open_event(ipc: &Ipc, name: &str, verifier: &AttributeVerifier) -> Result<Eve
     ipc.node()
         .service_builder(&service_name(name)?)
         .event()
-        .max_notifiers(8)
-        .max_listeners(24)
+        .max_notifiers(EVENT_NOTIFIERS)
+        .max_listeners(EVENT_LISTENERS)
         .max_nodes(MAX_NODES)
         .open_or_create_with_attributes(verifier)
         .map_err(|e| event_error(name, e))
@@ -122,11 +168,11 @@ impl CameraServices {
             .publish_subscribe::<[u8]>()
             .user_header::<FrameHeader>()
             .enable_safe_overflow(true)
-            .subscriber_max_buffer_size(2)
-            .subscriber_max_borrowed_samples(2)
+            .subscriber_max_buffer_size(FRAME_BUFFER)
+            .subscriber_max_borrowed_samples(FRAME_BORROWED)
             .history_size(0)
-            .max_publishers(2)
-            .max_subscribers(3)
+            .max_publishers(FRAME_PUBLISHERS)
+            .max_subscribers(FRAME_SUBSCRIBERS)
             .max_nodes(MAX_NODES)
             .open_or_create_with_attributes(&verifier)
             .map_err(|e| pubsub_error(&frames_name, e))?;
@@ -137,11 +183,11 @@ impl CameraServices {
             .service_builder(&service_name(&poses_name)?)
             .publish_subscribe::<PoseMessage>()
             .enable_safe_overflow(true)
-            .subscriber_max_buffer_size(4)
-            .subscriber_max_borrowed_samples(2)
-            .history_size(1)
-            .max_publishers(2)
-            .max_subscribers(16)
+            .subscriber_max_buffer_size(POSE_BUFFER)
+            .subscriber_max_borrowed_samples(POSE_BORROWED)
+            .history_size(POSE_HISTORY)
+            .max_publishers(POSE_PUBLISHERS)
+            .max_subscribers(POSE_SUBSCRIBERS)
             .max_nodes(MAX_NODES)
             .open_or_create_with_attributes(&verifier)
             .map_err(|e| pubsub_error(&poses_name, e))?;
@@ -152,10 +198,10 @@ impl CameraServices {
             .request_response::<StatsRequest, StatsSnapshot>()
             .enable_safe_overflow_for_requests(true)
             .enable_safe_overflow_for_responses(true)
-            .max_active_requests_per_client(2)
-            .max_response_buffer_size(2)
-            .max_servers(2)
-            .max_clients(8)
+            .max_active_requests_per_client(STATS_ACTIVE_REQUESTS)
+            .max_response_buffer_size(STATS_RESPONSE_BUFFER)
+            .max_servers(STATS_SERVERS)
+            .max_clients(STATS_CLIENTS)
             .max_nodes(MAX_NODES)
             .open_or_create_with_attributes(&verifier)
             .map_err(|e| request_response_error(&stats_name, e))?;
@@ -172,6 +218,65 @@ impl CameraServices {
             poses_name,
             stats_name,
         })
+    }
+
+    /// A frame publisher (producer side) for frames of up to `max_payload_len` bytes.
+    pub fn frame_publisher(
+        &self,
+        max_payload_len: usize,
+    ) -> Result<Publisher<ipc::Service, [u8], FrameHeader>, ClientError> {
+        self.frames
+            .publisher_builder()
+            .initial_max_slice_len(max_payload_len)
+            .allocation_strategy(AllocationStrategy::Static)
+            .max_loaned_samples(PUBLISHER_LOANS)
+            .create()
+            .map_err(|e| ClientError::port(&self.frames_name, "publisher", &e))
+    }
+
+    /// The frame subscriber (daemon side).
+    pub fn frame_subscriber(&self) -> Result<Subscriber<ipc::Service, [u8], FrameHeader>, ClientError> {
+        self.frames.subscriber_builder().create().map_err(|e| ClientError::port(&self.frames_name, "subscriber", &e))
+    }
+
+    /// Notifies "frame ready" (producer side).
+    pub fn frame_notifier(&self) -> Result<Notifier<ipc::Service>, ClientError> {
+        self.frame_events.notifier_builder().create().map_err(|e| ClientError::port(&self.frames_name, "notifier", &e))
+    }
+
+    /// Wakes on "frame ready" (daemon side).
+    pub fn frame_listener(&self) -> Result<Listener<ipc::Service>, ClientError> {
+        self.frame_events.listener_builder().create().map_err(|e| ClientError::port(&self.frames_name, "listener", &e))
+    }
+
+    /// The pose publisher (daemon side).
+    pub fn pose_publisher(&self) -> Result<Publisher<ipc::Service, PoseMessage, ()>, ClientError> {
+        self.poses.publisher_builder().create().map_err(|e| ClientError::port(&self.poses_name, "publisher", &e))
+    }
+
+    /// A pose subscriber (consumer side).
+    pub fn pose_subscriber(&self) -> Result<Subscriber<ipc::Service, PoseMessage, ()>, ClientError> {
+        self.poses.subscriber_builder().create().map_err(|e| ClientError::port(&self.poses_name, "subscriber", &e))
+    }
+
+    /// Notifies "poses ready" (daemon side).
+    pub fn pose_notifier(&self) -> Result<Notifier<ipc::Service>, ClientError> {
+        self.pose_events.notifier_builder().create().map_err(|e| ClientError::port(&self.poses_name, "notifier", &e))
+    }
+
+    /// Wakes on "poses ready" (consumer side).
+    pub fn pose_listener(&self) -> Result<Listener<ipc::Service>, ClientError> {
+        self.pose_events.listener_builder().create().map_err(|e| ClientError::port(&self.poses_name, "listener", &e))
+    }
+
+    /// The stats server (daemon side).
+    pub fn stats_server(&self) -> Result<Server<ipc::Service, StatsRequest, (), StatsSnapshot, ()>, ClientError> {
+        self.stats.server_builder().create().map_err(|e| ClientError::port(&self.stats_name, "server", &e))
+    }
+
+    /// A stats client.
+    pub fn stats_client(&self) -> Result<Client<ipc::Service, StatsRequest, (), StatsSnapshot, ()>, ClientError> {
+        self.stats.client_builder().create().map_err(|e| ClientError::port(&self.stats_name, "client", &e))
     }
 }
 

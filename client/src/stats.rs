@@ -140,3 +140,112 @@ impl Default for StatsSnapshot {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use core::mem::{align_of, offset_of, size_of};
+
+    /// The `## Stats` section of docs/PROTOCOL.md.
+    fn stats_section() -> &'static str {
+        let doc = include_str!("../../docs/PROTOCOL.md");
+        let start = doc.find("\n## Stats\n").expect("PROTOCOL.md has a Stats section");
+        let rest = &doc[start + 1..];
+        let end = rest[3..].find("\n## ").map_or(rest.len(), |i| i + 3);
+        &rest[..end]
+    }
+
+    /// (size, alignment, [(field, offset)]) of the table introduced by `` `Name` (`fusepose::Name` ``.
+    fn documented(section: &str, name: &str) -> (usize, usize, Vec<(String, usize)>) {
+        let intro = format!("`{name}` (`fusepose::{name}`");
+        let at = section.find(&intro).unwrap_or_else(|| panic!("no table for {name}"));
+        let text = &section[at..];
+        let number_after = |key: &str| -> usize {
+            let i = text.find(key).unwrap_or_else(|| panic!("{name}: no `{key}`")) + key.len();
+            text[i..]
+                .trim_start_matches(['*', ' '])
+                .chars()
+                .take_while(char::is_ascii_digit)
+                .collect::<String>()
+                .parse()
+                .unwrap()
+        };
+        let (size, align) = (number_after("size "), number_after("alignment "));
+        let table = &text[text.find("\n|").expect("a table")..];
+        let mut fields = Vec::new();
+        for line in table.lines().skip(1) {
+            if !line.starts_with('|') {
+                break;
+            }
+            let cells: Vec<&str> = line.split('|').map(str::trim).collect();
+            if let (Ok(offset), Some(field)) = (cells[1].parse::<usize>(), cells.get(2)) {
+                fields.push((field.trim_matches('`').to_owned(), offset));
+            }
+        }
+        (size, align, fields)
+    }
+
+    #[test]
+    fn protocol_doc_tables_match_the_stats_layouts() {
+        let section = stats_section();
+        let (size, align, fields) = documented(section, "StatsSnapshot");
+        assert_eq!((size, align), (size_of::<StatsSnapshot>(), align_of::<StatsSnapshot>()), "StatsSnapshot size");
+        let actual = [
+            ("format_version", offset_of!(StatsSnapshot, format_version)),
+            ("_reserved", offset_of!(StatsSnapshot, _reserved)),
+            ("camera_id", offset_of!(StatsSnapshot, camera_id)),
+            ("uptime_ns", offset_of!(StatsSnapshot, uptime_ns)),
+            ("window_ns", offset_of!(StatsSnapshot, window_ns)),
+            ("deadline_ns", offset_of!(StatsSnapshot, deadline_ns)),
+            ("frames_received", offset_of!(StatsSnapshot, frames_received)),
+            ("frames_processed", offset_of!(StatsSnapshot, frames_processed)),
+            ("frames_skipped_stale", offset_of!(StatsSnapshot, frames_skipped_stale)),
+            ("frames_missed_sequence", offset_of!(StatsSnapshot, frames_missed_sequence)),
+            ("frames_invalid", offset_of!(StatsSnapshot, frames_invalid)),
+            ("invalid_by_reason", offset_of!(StatsSnapshot, invalid_by_reason)),
+            ("deadline_misses", offset_of!(StatsSnapshot, deadline_misses)),
+            ("estimator_failures", offset_of!(StatsSnapshot, estimator_failures)),
+            ("poses_non_finite", offset_of!(StatsSnapshot, poses_non_finite)),
+            ("producer_restarts", offset_of!(StatsSnapshot, producer_restarts)),
+            ("since_start", offset_of!(StatsSnapshot, since_start)),
+            ("last_window", offset_of!(StatsSnapshot, last_window)),
+        ];
+        let want: Vec<(String, usize)> = actual.iter().map(|(f, o)| (f.to_string(), *o)).collect();
+        assert_eq!(fields, want, "PROTOCOL.md StatsSnapshot table vs the Rust type");
+        assert!(
+            section.contains(&format!("[u64; {}]", InvalidReason::COUNT)),
+            "invalid_by_reason is documented with {} entries",
+            InvalidReason::COUNT
+        );
+
+        let (size, align, fields) = documented(section, "LatencySummary");
+        assert_eq!((size, align), (size_of::<LatencySummary>(), align_of::<LatencySummary>()));
+        let want: Vec<(String, usize)> = [
+            ("count", offset_of!(LatencySummary, count)),
+            ("p50_ns", offset_of!(LatencySummary, p50_ns)),
+            ("p90_ns", offset_of!(LatencySummary, p90_ns)),
+            ("p99_ns", offset_of!(LatencySummary, p99_ns)),
+            ("p999_ns", offset_of!(LatencySummary, p999_ns)),
+            ("max_ns", offset_of!(LatencySummary, max_ns)),
+        ]
+        .iter()
+        .map(|(f, o)| (f.to_string(), *o))
+        .collect();
+        assert_eq!(fields, want);
+
+        let (size, align, fields) = documented(section, "StatsRequest");
+        assert_eq!((size, align), (size_of::<StatsRequest>(), align_of::<StatsRequest>()));
+        assert_eq!(fields, [("format_version".to_string(), 0), ("_reserved".to_string(), 2)]);
+        assert!(section.contains(&format!("wire version ({})", crate::WIRE_VERSION)), "the documented wire version");
+    }
+
+    #[test]
+    fn timelines_are_the_stages_then_end_to_end() {
+        let names = Stage::timeline_names();
+        for (i, stage) in Stage::ALL.iter().enumerate() {
+            assert_eq!(*stage as usize, i);
+            assert_eq!(names[i], stage.name());
+        }
+        assert_eq!(names[TIMELINE_COUNT - 1], "end_to_end");
+    }
+}

@@ -44,11 +44,11 @@ fn layouts() -> Vec<Layout> {
         layout!(PlaneRef in "frame_header.rs" as "fp_plane_ref": offset, len),
         layout!(FrameHeader in "frame_header.rs" as "fp_frame_header":
             magic, format_version, header_size, camera_id, width, height, depth_scale, color_format,
-            depth_format, has_labels, label_format, _reserved, sequence, capture_time_ns, fx, fy, cx, cy,
-            color, depth, labels),
+            depth_format, has_labels, label_format, instance_count, _reserved, sequence, capture_time_ns, fx, fy,
+            cx, cy, color, depth, labels, instance_classes, _reserved_end),
         layout!(WireObjectPose in "pose_message.rs" as "fp_object_pose":
-            class_id, instance_id, refine_iterations, _reserved, confidence, mask_pixels, bbox, quaternion,
-            translation_m),
+            class_id, instance_id, refine_iterations, flags, confidence, mask_pixels, bbox, quaternion,
+            translation_m, fit_score, depth_residual_m),
         layout!(PoseMessage in "pose_message.rs" as "fp_pose_message":
             format_version, object_count, status, invalid_reason, camera_id, frame_sequence, capture_time_ns,
             received_time_ns, published_time_ns, stage_ns, objects),
@@ -75,13 +75,16 @@ fn constants() -> Vec<(&'static str, u64)> {
         ("FUSEPOSE_COLOR_BGR8", ColorFormat::Bgr8 as u64),
         ("FUSEPOSE_DEPTH_U16", DepthFormat::U16 as u64),
         ("FUSEPOSE_DEPTH_F32", DepthFormat::F32 as u64),
-        ("FUSEPOSE_LABELS_U8", LabelFormat::U8 as u64),
-        ("FUSEPOSE_LABELS_U16", LabelFormat::U16 as u64),
+        ("FUSEPOSE_LABELS_U8", LabelFormat::U8.code() as u64),
+        ("FUSEPOSE_LABELS_U16", LabelFormat::U16.code() as u64),
+        ("FUSEPOSE_LABELS_INSTANCE_U16", LABELS_INSTANCE_U16 as u64),
         ("FUSEPOSE_STATUS_OK", PoseStatus::OK as u64),
         ("FUSEPOSE_STATUS_INVALID_FRAME", PoseStatus::INVALID_FRAME as u64),
         ("FUSEPOSE_STATUS_DEADLINE_MISSED", PoseStatus::DEADLINE_MISSED as u64),
         ("FUSEPOSE_STATUS_DEGRADED", PoseStatus::DEGRADED as u64),
         ("FUSEPOSE_STATUS_ESTIMATOR_FAILED", PoseStatus::ESTIMATOR_FAILED as u64),
+        ("FUSEPOSE_POSE_VERIFIED", PoseFlags::VERIFIED as u64),
+        ("FUSEPOSE_POSE_FROM_INSTANCE_LABELS", PoseFlags::FROM_INSTANCE_LABELS as u64),
         ("FUSEPOSE_STAGE_INGEST", Stage::Ingest as u64),
         ("FUSEPOSE_STAGE_SEGMENTATION", Stage::Segmentation as u64),
         ("FUSEPOSE_STAGE_SAMPLING", Stage::Sampling as u64),
@@ -207,12 +210,23 @@ fn c_example_parses_a_pose_message_written_by_rust() {
     msg.objects[0] = WireObjectPose {
         class_id: 3,
         instance_id: 0,
+        flags: PoseFlags::FROM_INSTANCE_LABELS,
         confidence: 0.75,
         quaternion: [0.0, 0.0, 0.6, 0.8],
         translation_m: [0.0125, -0.25, 0.875],
+        fit_score: f32::NAN,
+        depth_residual_m: f32::NAN,
         ..WireObjectPose::default()
     };
-    msg.objects[1] = WireObjectPose { class_id: 7, instance_id: 1, translation_m: [0.1, 0.2, 1.5], ..msg.objects[0] };
+    msg.objects[1] = WireObjectPose {
+        class_id: 7,
+        instance_id: 1,
+        flags: PoseFlags::VERIFIED,
+        translation_m: [0.1, 0.2, 1.5],
+        fit_score: 0.5,
+        depth_residual_m: 0.0025,
+        ..msg.objects[0]
+    };
     // SAFETY: PoseMessage is #[repr(C)], Copy and has no padding (checked by
     // `rust_field_lists_match_the_source`), so all its bytes are initialised.
     let bytes =
@@ -225,8 +239,15 @@ fn c_example_parses_a_pose_message_written_by_rust() {
     let out = run(&exe, &[&file]);
     let lines: Vec<&str> = out.lines().collect();
     assert_eq!(lines[0], "frame 4242 status 0x1 objects 2 latency 12.500 ms", "{out}");
-    assert_eq!(lines[1], "  class 3 instance 0 xyz_mm 12.5 -250.0 875.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75");
-    assert_eq!(lines[2], "  class 7 instance 1 xyz_mm 100.0 200.0 1500.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75");
+    assert_eq!(
+        lines[1],
+        "  class 3 instance 0 xyz_mm 12.5 -250.0 875.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75 flags 0x2"
+    );
+    assert_eq!(
+        lines[2],
+        "  class 7 instance 1 xyz_mm 100.0 200.0 1500.0 q_xyzw 0.0000 0.0000 0.6000 0.8000 conf 0.75 flags 0x1 \
+         fit 0.50 residual_mm 2.5"
+    );
     assert_eq!(lines.last(), Some(&"2 messages"));
 
     // A message of another wire version is refused.

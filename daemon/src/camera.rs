@@ -2,9 +2,10 @@
 //! estimator, and the per-frame path drain → validate → estimate → publish.
 
 use fusepose_client::{
-    CameraServices, FRAME_MAGIC, FrameHeader, InvalidReason, Ipc, MAX_OBJECTS, PoseMessage, PoseStatus, STAGE_COUNT,
-    Stage, StatsRequest, StatsSnapshot, WireObjectPose, decode_frame, monotonic_ns,
+    CameraServices, FRAME_MAGIC, FrameHeader, InvalidReason, Ipc, MAX_OBJECTS, PoseFlags, PoseMessage, PoseStatus,
+    STAGE_COUNT, Stage, StatsRequest, StatsSnapshot, WireObjectPose, decode_frame, monotonic_ns,
 };
+use fusepose_estimator::verify::Verification;
 use fusepose_estimator::{FrameError, ObjectPose};
 use iceoryx2::port::listener::Listener;
 use iceoryx2::port::notifier::Notifier;
@@ -17,7 +18,7 @@ use crate::counters::{FrameCounters, SequenceEvent, SequenceTracker};
 use crate::engine::{EngineFailure, PoseEngine, StageTimes};
 use crate::frame_view::to_frame_view;
 use crate::latency::{END_TO_END, LatencyBook};
-use crate::rate_limited_log::RateLimit;
+use crate::rate_limited_log::{RateLimit, RateLimitByKind};
 
 const LOG_INTERVAL_NS: u64 = 1_000_000_000;
 
@@ -42,14 +43,12 @@ pub struct CameraPorts {
 impl CameraPorts {
     pub fn open(ipc: &Ipc, camera: &str) -> anyhow::Result<Self> {
         let services = CameraServices::open(ipc, camera)?;
-        let port =
-            |what: &str, e: &dyn std::fmt::Debug| anyhow::anyhow!("camera {camera}: cannot create {what}: {e:?}");
-        let frames = services.frames.subscriber_builder().create().map_err(|e| port("frame subscriber", &e))?;
-        let frame_listener =
-            services.frame_events.listener_builder().create().map_err(|e| port("frame listener", &e))?;
-        let poses = services.poses.publisher_builder().create().map_err(|e| port("pose publisher", &e))?;
-        let pose_notifier = services.pose_events.notifier_builder().create().map_err(|e| port("pose notifier", &e))?;
-        let stats = services.stats.server_builder().create().map_err(|e| port("stats server", &e))?;
+        // Typed errors (capacity limits name the service, the limit, the cause and the fix).
+        let frames = services.frame_subscriber()?;
+        let frame_listener = services.frame_listener()?;
+        let poses = services.pose_publisher()?;
+        let pose_notifier = services.pose_notifier()?;
+        let stats = services.stats_server()?;
         Ok(Self { services, frames, frame_listener, poses, pose_notifier, stats })
     }
 }
@@ -64,26 +63,31 @@ pub struct CameraState {
     sequence: SequenceTracker,
     deadline_ns: u64,
     started_ns: u64,
-    invalid_log: RateLimit,
+    /// Per rejection reason: a burst of one kind never hides another.
+    invalid_log: RateLimitByKind,
     transport_log: RateLimit,
     estimator_log: RateLimit,
     /// Largest label id producers may send (the object set's classes; 0 = any).
     label_classes: u16,
 }
 
-fn wire_pose(p: &ObjectPose) -> WireObjectPose {
+/// A pose on the wire, with its verification when the daemon verifies
+/// (`fit_score` and `depth_residual_m` NaN and [`PoseFlags::VERIFIED`] clear otherwise).
+fn wire_pose(p: &ObjectPose, verdict: Option<&Verification>, flags: u16) -> WireObjectPose {
     let q = p.rotation.as_ref().coords; // [x, y, z, w]
     debug_assert!(pose_is_finite(p));
     WireObjectPose {
         class_id: p.class_id,
         instance_id: p.instance_id,
         refine_iterations: p.iterations,
-        _reserved: 0,
+        flags: flags | if verdict.is_some_and(|v| v.passed) { PoseFlags::VERIFIED } else { 0 },
         confidence: p.confidence,
         mask_pixels: p.mask_pixels,
         bbox: p.bbox,
         quaternion: [q.x, q.y, q.z, q.w],
         translation_m: [p.translation.x, p.translation.y, p.translation.z],
+        fit_score: verdict.map_or(f32::NAN, |v| v.fit),
+        depth_residual_m: verdict.map_or(f32::NAN, |v| v.depth_residual_m),
     }
 }
 
@@ -100,6 +104,8 @@ fn content_reason(e: &FrameError) -> InvalidReason {
         FrameError::DepthEmpty => InvalidReason::DepthEmpty,
         FrameError::DepthNonFinite { .. } => InvalidReason::DepthNonFinite,
         FrameError::LabelOutOfRange { .. } => InvalidReason::LabelOutOfRange,
+        FrameError::InstanceBeyondTable { .. } => InvalidReason::InstanceBeyondTable,
+        FrameError::InstanceClassUnknown { .. } => InvalidReason::InstanceClassUnknown,
         _ => InvalidReason::EstimatorRefused,
     }
 }
@@ -132,7 +138,7 @@ impl CameraState {
             sequence: SequenceTracker::default(),
             deadline_ns,
             started_ns: now_ns,
-            invalid_log: RateLimit::new(LOG_INTERVAL_NS),
+            invalid_log: RateLimitByKind::new(LOG_INTERVAL_NS, InvalidReason::COUNT),
             transport_log: RateLimit::new(LOG_INTERVAL_NS),
             estimator_log: RateLimit::new(LOG_INTERVAL_NS),
             label_classes,
@@ -245,11 +251,15 @@ impl CameraState {
                 .unwrap_or(Err(EngineFailure::Panicked));
         match outcome {
             Ok(()) => {
+                // The frame's own instance plane defined every mask (unless the segmenter replaced it).
+                let from_instances = view.labels.is_some_and(|l| l.is_instances()) && self.engine.uses_frame_labels();
+                let flags = if from_instances { PoseFlags::FROM_INSTANCE_LABELS } else { 0 };
                 let poses = self.engine.poses();
                 // Non-finite poses (e.g. a network fed extreme input) are never published.
                 let mut finite = 0;
-                for pose in poses.iter().filter(|p| pose_is_finite(p)).take(MAX_OBJECTS) {
-                    msg.objects[finite] = wire_pose(pose);
+                let verdicts = self.engine.verdicts();
+                for (i, pose) in poses.iter().enumerate().filter(|(_, p)| pose_is_finite(p)).take(MAX_OBJECTS) {
+                    msg.objects[finite] = wire_pose(pose, verdicts.get(i), flags);
                     finite += 1;
                 }
                 let non_finite = poses.iter().filter(|p| !pose_is_finite(p)).count();
@@ -295,7 +305,7 @@ impl CameraState {
         self.counters.count_invalid(reason);
         msg.status = PoseStatus::INVALID_FRAME;
         msg.invalid_reason = reason as u32;
-        if let Some(suppressed) = self.invalid_log.allow(monotonic_ns()) {
+        if let Some(suppressed) = self.invalid_log.allow(reason as usize, monotonic_ns()) {
             tracing::warn!(
                 camera = %self.name,
                 sequence = msg.frame_sequence,
@@ -303,6 +313,21 @@ impl CameraState {
                 suppressed,
                 "frame rejected: {detail}"
             );
+        }
+    }
+
+    /// Logs what the rate limits suppressed and no later line reported (called every tick and at exit).
+    pub fn report_suppressed(&mut self, now_ns: u64) {
+        let camera = &self.name;
+        self.invalid_log.take_overdue(now_ns, |kind, n| {
+            let reason = InvalidReason::from_code(kind as u32).map_or("unknown", InvalidReason::name);
+            tracing::warn!(camera = %camera, reason, suppressed = n, "frames rejected: {n} more frames for {reason} (lines suppressed)");
+        });
+        if let Some(n) = self.transport_log.take_overdue(now_ns) {
+            tracing::warn!(camera = %camera, suppressed = n, "iceoryx2 transfer failures: {n} more (lines suppressed)");
+        }
+        if let Some(n) = self.estimator_log.take_overdue(now_ns) {
+            tracing::warn!(camera = %camera, suppressed = n, "estimator failures: {n} more (lines suppressed)");
         }
     }
 

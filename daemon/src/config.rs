@@ -60,10 +60,12 @@ pub struct EstimatorConfig {
     pub objects: String,
     /// Mesh units → metres for an objects directory (0.001 for millimetre meshes).
     pub objects_scale: f64,
-    /// Points sampled per instance (N).
-    pub num_points: usize,
-    /// Colour crop side, pixels (S).
-    pub crop_size: usize,
+    /// Points sampled per instance (N). Unset: the network's own (from the
+    /// weight file); ICP: 500. Set: overrides the weight file's N.
+    pub num_points: Option<usize>,
+    /// Colour crop side, pixels (S). Unset: the network's own (from the weight
+    /// file); ICP: 64. Set: overrides the weight file's S.
+    pub crop_size: Option<usize>,
     /// Most instances estimated per frame (largest first).
     pub max_instances: usize,
     /// Smallest instance mask kept, pixels.
@@ -72,8 +74,9 @@ pub struct EstimatorConfig {
     pub refine_iterations: usize,
     /// Threads per frame for estimation: the network uses up to 2 (the loop
     /// thread plus one persistent worker); ICP runs inline (1). Larger values
-    /// are accepted with a warning.
-    pub worker_threads: usize,
+    /// are accepted with a warning. Unset: as many as the machine has CPUs
+    /// (at most 2), see [`EstimatorConfig::estimation_threads`].
+    pub worker_threads: Option<usize>,
     /// Instance labels: `auto`, `labels` or `net` (see [`MaskSource`]).
     pub masks: MaskSource,
     /// Network: fit each frame into its deadline (fewer refiner iterations,
@@ -83,6 +86,13 @@ pub struct EstimatorConfig {
     /// all; the useful threshold depends on the weights (docs/BENCHMARKS.md,
     /// "Ghost objects").
     pub min_confidence: f32,
+    /// Pose verification against the depth image: "drop" (default: poses that
+    /// fail are not published), "flag" (published with VERIFIED clear), "off".
+    pub verify: String,
+    /// Verification thresholds (`fusepose_estimator::verify::VerifyConfig`):
+    /// least fit (inliers × coverage × (1 − behind)) and least inlier fraction.
+    pub verify_min_fit: f32,
+    pub verify_min_inliers: f32,
     /// Regions of one class whose points fit inside one object (within this
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
@@ -109,6 +119,15 @@ pub struct TrackingSettings {
     pub full_estimate_every: u32,
     /// Refiner iterations when tracking.
     pub refine_iterations: usize,
+}
+
+impl EstimatorConfig {
+    /// Threads the network may use per frame: `worker_threads`, else the
+    /// CPUs this process may run on (`available_parallelism`), at most 2.
+    pub fn estimation_threads(&self) -> usize {
+        let machine = || std::thread::available_parallelism().map_or(1, |n| n.get());
+        self.worker_threads.unwrap_or_else(machine).clamp(1, 2)
+    }
 }
 
 impl Default for TrackingSettings {
@@ -167,15 +186,18 @@ impl Default for EstimatorConfig {
             weights: PathBuf::from("models/builtin.safetensors"),
             objects: "builtin".to_owned(),
             objects_scale: 1.0,
-            num_points: 500,
-            crop_size: 64,
+            num_points: None,
+            crop_size: None,
             max_instances: 8,
             min_pixels: 50,
             refine_iterations: 2,
-            worker_threads: 1,
+            worker_threads: None,
             masks: MaskSource::Auto,
             deadline_aware: true,
             min_confidence: 0.0,
+            verify: "drop".to_owned(),
+            verify_min_fit: fusepose_estimator::verify::VerifyConfig::default().min_fit,
+            verify_min_inliers: fusepose_estimator::verify::VerifyConfig::default().min_inlier_fraction,
             join_parts: 1.0,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             pin_cpus: Vec::new(),
@@ -256,11 +278,15 @@ impl DaemonConfig {
         if !(e.objects_scale.is_finite() && e.objects_scale > 0.0) {
             return Err(invalid("estimator.objects_scale", e.objects_scale, "must be positive"));
         }
-        if e.num_points == 0 || e.num_points > 1 << 20 {
-            return Err(invalid("estimator.num_points", e.num_points, "must be in 1..=1048576"));
+        if let Some(n) = e.num_points
+            && (n == 0 || n > 1 << 20)
+        {
+            return Err(invalid("estimator.num_points", n, "must be in 1..=1048576 (or unset: the weight file's)"));
         }
-        if e.crop_size == 0 || e.crop_size > 1024 {
-            return Err(invalid("estimator.crop_size", e.crop_size, "must be in 1..=1024"));
+        if let Some(s) = e.crop_size
+            && (s == 0 || s > 1024)
+        {
+            return Err(invalid("estimator.crop_size", s, "must be in 1..=1024 (or unset: the weight file's)"));
         }
         if e.max_instances == 0 || e.max_instances > fusepose_client::MAX_OBJECTS {
             return Err(invalid("estimator.max_instances", e.max_instances, "must be in 1..=32 (poses per message)"));
@@ -278,11 +304,23 @@ impl DaemonConfig {
                 "must be refine:N (N in 0..=255), erode-cells or cells",
             ));
         }
+        if !["drop", "flag", "off"].contains(&e.verify.as_str()) {
+            return Err(invalid("estimator.verify", &e.verify, "must be \"drop\", \"flag\" or \"off\""));
+        }
+        for (key, v) in
+            [("estimator.verify_min_fit", e.verify_min_fit), ("estimator.verify_min_inliers", e.verify_min_inliers)]
+        {
+            if !(0.0..=1.0).contains(&v) {
+                return Err(invalid(key, v, "must be in 0..=1"));
+            }
+        }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
         }
-        if e.worker_threads == 0 || e.worker_threads > 64 {
-            return Err(invalid("estimator.worker_threads", e.worker_threads, "must be in 1..=64"));
+        if let Some(t) = e.worker_threads
+            && (t == 0 || t > 64)
+        {
+            return Err(invalid("estimator.worker_threads", t, "must be in 1..=64 (or unset: the machine's CPUs)"));
         }
         let t = &e.tracking;
         if !(t.max_fit_mm.is_finite() && t.max_fit_mm > 0.0) {
@@ -357,6 +395,8 @@ mod tests {
         let c = DaemonConfig::parse(text).unwrap();
         assert_eq!(c.cameras, ["cam0"]);
         assert_eq!(c.estimator.kind, EstimatorKind::Net, "the shipped config runs the shipped network");
+        // Sizes come from the weight file and threads from the machine unless overridden.
+        assert_eq!((c.estimator.num_points, c.estimator.crop_size, c.estimator.worker_threads), (None, None, None));
     }
 
     #[test]
@@ -390,6 +430,23 @@ mod tests {
         assert!(err.starts_with("estimator.tracking.full_estimate_every"), "{err}");
         let err = DaemonConfig::parse("[estimator]\npin_cpus = [0, 1, 2]\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.pin_cpus"), "{err}");
+    }
+
+    #[test]
+    fn sizes_and_threads_are_optional_overrides() {
+        let c = DaemonConfig::parse("").unwrap();
+        assert_eq!((c.estimator.num_points, c.estimator.crop_size, c.estimator.worker_threads), (None, None, None));
+        let cpus = std::thread::available_parallelism().map_or(1, |n| n.get());
+        assert_eq!(c.estimator.estimation_threads(), cpus.clamp(1, 2), "unset: the machine's CPUs, at most 2");
+        let c = DaemonConfig::parse("[estimator]\nnum_points = 128\ncrop_size = 32\nworker_threads = 1\n").unwrap();
+        assert_eq!((c.estimator.num_points, c.estimator.crop_size), (Some(128), Some(32)));
+        assert_eq!(c.estimator.estimation_threads(), 1);
+        let c = DaemonConfig::parse("[estimator]\nworker_threads = 8\n").unwrap();
+        assert_eq!(c.estimator.estimation_threads(), 2, "the network uses at most 2");
+        let err = DaemonConfig::parse("[estimator]\ncrop_size = 0\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.crop_size = 0"), "{err}");
+        let err = DaemonConfig::parse("[estimator]\nworker_threads = 0\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.worker_threads = 0"), "{err}");
     }
 
     #[test]

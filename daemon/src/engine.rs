@@ -8,6 +8,7 @@ use std::sync::Arc;
 use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions};
 use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile};
+use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{
     EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
     Workspace, WorkspaceConfig,
@@ -33,12 +34,16 @@ pub struct EngineSpec {
     pub masks: MaskSource,
     /// Poses less confident than this are not published (`estimator.min_confidence`).
     pub min_confidence: f32,
+    /// Pose verification against the depth image (`estimator.verify*`); `None` = off.
+    pub verify: Option<(Arc<ObjectSet>, VerifyConfig, bool)>,
     /// Per class (id − 1): regions of the class whose points lie within this
     /// many metres of each other are one instance (`estimator.join_parts`);
     /// empty = never join.
     pub part_extents: Vec<f32>,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
+    /// The network's and segmenter's cost measured at start (network only).
+    pub startup_cost: Option<crate::startup_cost::StartupCost>,
 }
 
 /// The object set named by `estimator.objects`.
@@ -51,11 +56,15 @@ pub fn load_objects(config: &EstimatorConfig) -> anyhow::Result<ObjectSet> {
         .map_err(|e| anyhow::anyhow!("estimator.objects = {:?}: {e}", config.objects))
 }
 
+/// Points and crop side without a network to take them from (ICP, transport only).
+const ICP_NUM_POINTS: usize = 500;
+const ICP_CROP_SIZE: usize = 64;
+
 fn workspace_config(config: &EstimatorConfig, objects: &ObjectSet) -> WorkspaceConfig {
     WorkspaceConfig {
         max_instances: config.max_instances,
-        num_points: config.num_points,
-        crop_size: config.crop_size,
+        num_points: config.num_points.unwrap_or(ICP_NUM_POINTS),
+        crop_size: config.crop_size.unwrap_or(ICP_CROP_SIZE),
         min_pixels: config.min_pixels,
         num_classes: objects.len().min(u16::MAX as usize) as u16,
         ..WorkspaceConfig::default()
@@ -98,12 +107,26 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     spec.min_confidence = config.min_confidence;
     if spec.factory.is_some() {
         let objects = load_objects(config)?;
+        if config.verify != "off" {
+            let cfg = VerifyConfig {
+                min_fit: config.verify_min_fit,
+                min_inlier_fraction: config.verify_min_inliers,
+                ..VerifyConfig::default()
+            };
+            spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
+        }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.segmenter = segmenter(config, &objects)?;
         // Checked by the config's validation; a bad value there is an error, not this default.
         spec.seg_boundary =
             config.seg_boundary.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_boundary: {e}"))?;
         spec.masks = config.masks;
+        if let (Some(seg), Some(cost)) = (&spec.segmenter, spec.startup_cost.as_mut()) {
+            match crate::startup_cost::measure_segmenter(seg, spec.seg_boundary) {
+                Ok(ns) => cost.segment_ns = Some(ns),
+                Err(e) => tracing::warn!(error = %e, "timing the segmenter at start failed"),
+            }
+        }
         if let Some(seg) = &spec.segmenter {
             spec.description += &format!(
                 "; masks {:?}: segmenter {}x{} when frames carry no labels",
@@ -126,8 +149,10 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             segmenter: None,
             masks: MaskSource::Labels,
             min_confidence: 0.0,
+            verify: None,
             part_extents: Vec::new(),
             seg_boundary: Boundary::default(),
+            startup_cost: None,
         })
     };
     match config.kind {
@@ -139,8 +164,10 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             segmenter: None,
             masks: MaskSource::Labels,
             min_confidence: 0.0,
+            verify: None,
             part_extents: Vec::new(),
             seg_boundary: Boundary::default(),
+            startup_cost: None,
         }),
         EstimatorKind::Icp => icp(),
         EstimatorKind::Net => {
@@ -161,7 +188,7 @@ fn net_options(config: &EstimatorConfig) -> NetOptions {
     let t = &config.tracking;
     NetOptions {
         refine_iterations: Some(config.refine_iterations),
-        threads: config.worker_threads.clamp(1, 2),
+        threads: config.estimation_threads(),
         tracking: t.enabled.then(|| fusepose_estimator::tracking::TrackingConfig {
             max_fit_m: t.max_fit_mm / 1000.0,
             full_estimate_every: t.full_estimate_every,
@@ -176,15 +203,31 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
     let options = || net_options(config);
     let weights_error =
         |e: NetLoadError| anyhow::anyhow!("estimator.weights = {:?}: {e}", config.weights.display().to_string());
-    let probe = NetEstimator::load(&config.weights, &objects, options()).map_err(weights_error)?;
-    let workspace = WorkspaceConfig { min_pixels: config.min_pixels, ..probe.workspace_config(config.max_instances) };
-    if (workspace.num_points, workspace.crop_size) != (config.num_points, config.crop_size) {
-        tracing::warn!(
+    let mut probe = NetEstimator::load(&config.weights, &objects, options()).map_err(weights_error)?;
+    // Sizes come from the weight file; the configuration may override them.
+    let own = probe.workspace_config(config.max_instances);
+    let workspace = WorkspaceConfig {
+        min_pixels: config.min_pixels,
+        num_points: config.num_points.unwrap_or(own.num_points),
+        crop_size: config.crop_size.unwrap_or(own.crop_size),
+        ..own
+    };
+    if (workspace.num_points, workspace.crop_size) != (own.num_points, own.crop_size) {
+        tracing::info!(
             num_points = workspace.num_points,
             crop_size = workspace.crop_size,
-            "estimator.num_points / crop_size replaced by the sizes the network was trained with"
+            "estimator.num_points / crop_size override the weight file's {} points, {} px crop",
+            own.num_points,
+            own.crop_size
         );
     }
+    let startup_cost = match crate::startup_cost::measure_net(&mut probe, workspace) {
+        Ok(cost) => Some(cost),
+        Err(e) => {
+            tracing::warn!(error = %e, "timing the network at start failed");
+            None
+        }
+    };
     let description = format!(
         "net ({}, {} objects, {} refine iterations)",
         config.weights.display(),
@@ -210,8 +253,10 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         segmenter: None,
         masks: MaskSource::Labels,
         min_confidence: 0.0,
+        verify: None,
         part_extents: Vec::new(),
         seg_boundary: Boundary::default(),
+        startup_cost,
     })
 }
 
@@ -245,6 +290,45 @@ pub struct PoseEngine {
     ignore_deadlines: bool,
     /// Poses less confident than this are dropped after each estimate.
     min_confidence: f32,
+    /// Checks each pose against the depth image; with `verify_drop` failing poses are dropped.
+    verifier: Option<Verifier>,
+    verify_drop: bool,
+    /// The verification of each pose in `poses` (same order), when verifying.
+    verdicts: Vec<Verification>,
+    /// Poses dropped by verification in the last frame.
+    rejected: usize,
+    /// The segmenter's instance → class table for the current frame.
+    instance_classes: Vec<u16>,
+}
+
+/// Checks each pose against the frame's depth and its instance mask into
+/// `verdicts` (same order); with `drop` removes the poses that fail and returns
+/// how many. No allocation.
+fn verify_poses(
+    verifier: Option<&mut Verifier>,
+    ws: Option<&Workspace>,
+    poses: &mut PoseSet,
+    verdicts: &mut Vec<Verification>,
+    drop: bool,
+    frame: &FrameView<'_>,
+) -> usize {
+    verdicts.clear();
+    let (Some(verifier), Some(ws)) = (verifier, ws) else { return 0 };
+    for pose in poses.as_slice() {
+        let v = match ws.component_id(pose.instance_id as usize) {
+            Some(id) => verifier.verify(frame, MaskRef { ids: ws.component_ids(), id, bbox: pose.bbox }, pose),
+            None => Verification { depth_residual_m: f32::NAN, ..Verification::default() },
+        };
+        verdicts.push(v);
+    }
+    if !drop {
+        return 0;
+    }
+    let before = poses.len();
+    let mut it = verdicts.iter();
+    poses.retain(|_| it.next().is_some_and(|v| v.passed));
+    verdicts.retain(|v| v.passed);
+    before - poses.len()
 }
 
 /// Stage durations of one frame, ns (0 = stage not run).
@@ -279,6 +363,11 @@ impl PoseEngine {
             labels: Vec::new(),
             ignore_deadlines: false,
             min_confidence: spec.min_confidence,
+            verifier: spec.verify.as_ref().map(|(objects, cfg, _)| Verifier::new(objects, *cfg)),
+            verify_drop: spec.verify.as_ref().is_some_and(|v| v.2),
+            verdicts: Vec::with_capacity(spec.workspace.max_instances),
+            rejected: 0,
+            instance_classes: Vec::with_capacity(fusepose_estimator::seg::voting::MAX_INSTANCES + 1),
         })
     }
 
@@ -298,6 +387,11 @@ impl PoseEngine {
             labels: Vec::new(),
             ignore_deadlines: false,
             min_confidence: 0.0,
+            verifier: None,
+            verify_drop: false,
+            verdicts: Vec::new(),
+            rejected: 0,
+            instance_classes: Vec::new(),
         })
     }
 
@@ -313,16 +407,26 @@ impl PoseEngine {
             Some(seg) if self.masks == MaskSource::Net || frame.labels.is_none() => {
                 let ts = fusepose_client::monotonic_ns();
                 frame.validate()?;
-                let pixels = frame.width() * frame.height();
-                if self.labels.len() != pixels {
-                    self.labels.resize(pixels, 0);
-                }
-                seg.segment(frame, &mut self.labels).map_err(|e| match e {
+                // With the centre-offset head the segmenter separates touching
+                // copies of a class: an instance plane (its class table copied
+                // into a buffer of fixed capacity), else a class plane.
+                let plane = seg.segment_plane(frame, &mut self.labels).map_err(|e| match e {
                     SegError::Frame(f) => EngineFailure::Refused(f),
                     other => EngineFailure::Segment(other),
                 })?;
+                let is_instances = plane.is_instances();
+                self.instance_classes.clear();
+                if let LabelPlane::Instances { classes, .. } = plane {
+                    let n = classes.len().min(self.instance_classes.capacity());
+                    self.instance_classes.extend_from_slice(&classes[..n]);
+                }
                 times[Stage::Segmentation as usize] = fusepose_client::monotonic_ns() - ts;
-                segmented = FrameView { labels: Some(LabelPlane::U16(&self.labels)), ..*frame };
+                let labels = if is_instances {
+                    LabelPlane::Instances { ids: &self.labels, classes: &self.instance_classes }
+                } else {
+                    LabelPlane::U16(&self.labels)
+                };
+                segmented = FrameView { labels: Some(labels), ..*frame };
                 &segmented
             }
             _ => frame,
@@ -337,6 +441,14 @@ impl PoseEngine {
         match result {
             Ok(()) => {
                 self.poses.retain_confident(self.min_confidence);
+                self.rejected = verify_poses(
+                    self.verifier.as_mut(),
+                    self.workspace.as_ref(),
+                    &mut self.poses,
+                    &mut self.verdicts,
+                    self.verify_drop,
+                    frame,
+                );
                 Ok(())
             }
             Err(EstimateError::Frame(e)) => Err(EngineFailure::Refused(e)),
@@ -367,6 +479,17 @@ impl PoseEngine {
         self.poses.as_slice()
     }
 
+    /// The verification of each pose of [`PoseEngine::poses`] (same order);
+    /// empty when verification is off.
+    pub fn verdicts(&self) -> &[Verification] {
+        &self.verdicts
+    }
+
+    /// Poses the last frame's verification dropped (`estimator.verify = "drop"`).
+    pub fn rejected_by_verification(&self) -> usize {
+        self.rejected
+    }
+
     /// Instances found in the last frame but not estimated (beyond capacity).
     pub fn instances_found(&self) -> usize {
         self.workspace.as_ref().map_or(0, |w| w.instances.len())
@@ -375,5 +498,11 @@ impl PoseEngine {
     /// Largest label id a producer may send: the object set's classes (0 = any, transport only).
     pub fn label_classes(&self) -> u16 {
         self.workspace.as_ref().map_or(0, |w| w.config.num_classes)
+    }
+
+    /// Whether a frame's own label plane defines the masks when it has one
+    /// (false when `estimator.masks = "net"` segments every frame).
+    pub fn uses_frame_labels(&self) -> bool {
+        !(self.segmenter.is_some() && self.masks == MaskSource::Net)
     }
 }

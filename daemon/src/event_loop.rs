@@ -10,6 +10,7 @@ use iceoryx2::prelude::*;
 use iceoryx2::waitset::{WaitSetAttachmentId, WaitSetRunResult};
 
 use crate::camera::{CameraPorts, CameraState};
+use crate::camera_lock::CameraLock;
 use crate::config::DaemonConfig;
 use crate::engine::{EngineSpec, PoseEngine};
 use crate::interval_log::IntervalLog;
@@ -20,6 +21,9 @@ pub struct RunReport {
     pub cameras: Vec<(String, crate::counters::FrameCounters)>,
     pub hlog_path: Option<std::path::PathBuf>,
 }
+
+/// Far enough ahead that every rate-limit interval counts as over (exit report).
+const LOG_FLUSH_NS: u64 = 3_600_000_000_000;
 
 fn seconds_to_ns(s: f64) -> u64 {
     (s * 1e9) as u64
@@ -48,16 +52,30 @@ fn poll_frames(ports: &[CameraPorts], until_ns: u64) -> Option<usize> {
 /// Runs the daemon until SIGINT/SIGTERM (or `stop` becomes true).
 pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool>>) -> anyhow::Result<RunReport> {
     let threads_used = if spec.estimate_stage == Stage::Network && spec.factory.is_some() { 2 } else { 1 };
-    if config.estimator.worker_threads > threads_used {
+    if let Some(asked) = config.estimator.worker_threads
+        && asked > threads_used
+    {
         tracing::warn!(
-            worker_threads = config.estimator.worker_threads,
+            worker_threads = asked,
             used = threads_used,
             "estimator.worker_threads: only {threads_used} used (the network uses at most 2, ICP 1)"
         );
     }
     // Refuse a root directory other users could tamper with, before iceoryx2 touches it.
-    crate::ipc_root::check_root_path(&crate::ipc_root::effective_root(&config.ipc_options())?)?;
+    let root = crate::ipc_root::effective_root(&config.ipc_options())?;
+    crate::ipc_root::check_root_path(&root)?;
     let ipc = Ipc::new(&config.ipc_options())?;
+    // One daemon per camera: lock every camera before opening any port.
+    let prefix = crate::ipc_root::effective_prefix(&config.ipc_options())?;
+    let node = format!("{} ({})", ipc.node().name(), ipc.node().id());
+    let mut locks = Vec::with_capacity(config.cameras.len());
+    for name in &config.cameras {
+        let mut lock = CameraLock::acquire(&root, &prefix, name)?;
+        if let Err(e) = lock.record_node(&node) {
+            tracing::warn!(path = %lock.path().display(), error = %e, "cannot write the node into the camera lock");
+        }
+        locks.push(lock);
+    }
     let (removed, failed) = ipc.cleanup_dead_nodes();
     if removed + failed > 0 {
         tracing::info!(removed, failed, "removed iceoryx2 resources of dead processes at start");
@@ -102,6 +120,9 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
         .attach_interval(Duration::from_millis(config.ipc.tick_ms))
         .map_err(|e| anyhow::anyhow!("WaitSet: {e:?}"))?;
 
+    if let Some(cost) = &spec.startup_cost {
+        tracing::info!("budget: {}", cost.describe(config.deadline_ms));
+    }
     tracing::info!(
         cameras = ?config.cameras,
         estimator = %spec.description,
@@ -196,6 +217,7 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
         let now = monotonic_ns();
         for (p, s) in ports.iter().zip(states.iter_mut()) {
             s.serve_stats(p);
+            s.report_suppressed(now);
         }
         if now.saturating_sub(states[0].latency.window_start_ns) >= window_ns {
             write_windows(&mut hlog, &states, now);
@@ -222,6 +244,8 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
 
     let end = monotonic_ns();
     write_windows(&mut hlog, &states, end);
+    // Suppressed lines not reported yet, whether or not their second is over.
+    states.iter_mut().for_each(|s| s.report_suppressed(end.saturating_add(LOG_FLUSH_NS)));
     for s in &states {
         tracing::info!(camera = %s.name, "final: {}", s.summary_line(false));
         let names = Stage::timeline_names();
@@ -245,5 +269,6 @@ pub fn run(config: &DaemonConfig, spec: &EngineSpec, stop: Option<Arc<AtomicBool
     drop(hlog);
     drop(frame_guards);
     drop(tick);
+    drop(locks);
     Ok(RunReport { cameras: states.iter().map(|s| (s.name.clone(), s.counters.clone())).collect(), hlog_path })
 }

@@ -28,6 +28,11 @@ pub fn effective_root(options: &fusepose_client::IpcOptions) -> Result<PathBuf, 
     Ok(PathBuf::from(config.global.root_path().to_string()))
 }
 
+/// The resource prefix iceoryx2 will use for `options` (its default when unset).
+pub fn effective_prefix(options: &fusepose_client::IpcOptions) -> Result<String, RootPathError> {
+    Ok(options.config()?.global.prefix.to_string())
+}
+
 /// Checks the root path and each existing ancestor (see the module doc).
 pub fn check_root_path(root: &Path) -> Result<(), RootPathError> {
     for dir in root.ancestors() {
@@ -80,5 +85,8 @@ mod tests {
         assert!(root.is_absolute(), "{}", root.display());
         let custom = fusepose_client::IpcOptions { root_path: Some("/run/fp".into()), ..Default::default() };
         assert_eq!(effective_root(&custom).unwrap(), PathBuf::from("/run/fp/"));
+        assert_eq!(effective_prefix(&fusepose_client::IpcOptions::default()).unwrap(), "iox2_");
+        let custom = fusepose_client::IpcOptions { prefix: Some("fp_".into()), ..Default::default() };
+        assert_eq!(effective_prefix(&custom).unwrap(), "fp_");
     }
 }

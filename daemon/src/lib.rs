@@ -8,6 +8,7 @@
 //! frame is processed while its shared-memory sample is borrowed.
 
 pub mod camera;
+pub mod camera_lock;
 pub mod config;
 pub mod counters;
 pub mod engine;
@@ -17,6 +18,7 @@ pub mod interval_log;
 pub mod ipc_root;
 pub mod latency;
 pub mod rate_limited_log;
+pub mod startup_cost;
 
 pub use config::{DaemonConfig, EstimatorKind};
 pub use event_loop::{RunReport, run};

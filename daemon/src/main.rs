@@ -14,7 +14,7 @@ struct Args {
     /// every key. Without it every key takes its default.
     #[arg(long)]
     config: Option<PathBuf>,
-    /// Check the configuration and exit.
+    /// Check the configuration, print the measured budget (network configurations) and exit.
     #[arg(long)]
     check: bool,
 }
@@ -54,6 +54,9 @@ fn main() -> ExitCode {
     };
     if args.check {
         println!("configuration ok: cameras {:?}, estimator {}", config.cameras, spec.description);
+        if let Some(cost) = &spec.startup_cost {
+            println!("budget: {}", cost.describe(config.deadline_ms));
+        }
         return ExitCode::SUCCESS;
     }
     match fusepose_daemon::run(&config, &spec, None) {

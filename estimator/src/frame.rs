@@ -79,11 +79,17 @@ impl DepthPlane<'_> {
     }
 }
 
-/// Per-pixel class ids (0 = background).
+/// Per-pixel labels (0 = background): class ids, or instance ids with their classes.
 #[derive(Clone, Copy, Debug)]
 pub enum LabelPlane<'a> {
+    /// Class ids.
     U8(&'a [u8]),
+    /// Class ids.
     U16(&'a [u16]),
+    /// Instance ids per pixel (0 = background) and the instance class table:
+    /// `classes[id]` is the class id of instance `id` (index 0 unused). Each
+    /// instance id is one object instance (see [`crate::instances`]).
+    Instances { ids: &'a [u16], classes: &'a [u16] },
 }
 
 impl LabelPlane<'_> {
@@ -92,6 +98,7 @@ impl LabelPlane<'_> {
         match self {
             LabelPlane::U8(data) => data.len(),
             LabelPlane::U16(data) => data.len(),
+            LabelPlane::Instances { ids, .. } => ids.len(),
         }
     }
 
@@ -99,20 +106,30 @@ impl LabelPlane<'_> {
         self.len() == 0
     }
 
+    /// Whether the plane holds instance ids.
+    pub fn is_instances(&self) -> bool {
+        matches!(self, LabelPlane::Instances { .. })
+    }
+
     /// Largest class id in the plane (0 for an empty or all-background plane).
     pub fn max_class(&self) -> u16 {
         match self {
             LabelPlane::U8(data) => data.iter().copied().max().unwrap_or(0) as u16,
             LabelPlane::U16(data) => data.iter().copied().max().unwrap_or(0),
+            LabelPlane::Instances { .. } => (0..self.len()).map(|i| self.class_at(i)).max().unwrap_or(0),
         }
     }
 
-    /// Class id of value `index` (0 = background, also for an out-of-range index).
+    /// Class id of value `index` (0 = background, also for an out-of-range
+    /// index and for an instance id without a table entry).
     #[inline]
     pub fn class_at(&self, index: usize) -> u16 {
         match self {
             LabelPlane::U8(data) => data.get(index).map_or(0, |&c| c as u16),
             LabelPlane::U16(data) => data.get(index).copied().unwrap_or(0),
+            LabelPlane::Instances { ids, classes } => {
+                ids.get(index).and_then(|&id| classes.get(id as usize)).copied().unwrap_or(0)
+            }
         }
     }
 }
@@ -187,9 +204,12 @@ impl FrameView<'_> {
 
     /// Checks the plane contents (one pass over depth and labels; call after
     /// [`FrameView::validate`]): at least one depth reading, and no label id
-    /// above `num_classes` (0 = any id). Frames failing these are not
-    /// malformed but carry nothing a pose could come from, or a label map that
-    /// does not match the object set.
+    /// above `num_classes` (0 = any id). For instance planes: every instance
+    /// id has a table entry, and every instance present has a class in
+    /// 1..=`num_classes` (class 0 is refused even when `num_classes` is 0).
+    /// Frames failing these are not malformed but carry nothing a pose could
+    /// come from, or a label map that does not match the object set.
+    /// Never allocates.
     pub fn check_content(&self, num_classes: u16) -> Result<DepthCensus, FrameError> {
         let census = self.depth.census();
         if census.valid == 0 {
@@ -199,16 +219,39 @@ impl FrameView<'_> {
                 FrameError::DepthEmpty
             });
         }
-        if let Some(labels) = &self.labels
-            && num_classes != 0
-        {
-            let max = labels.max_class();
-            if max > num_classes {
-                return Err(FrameError::LabelOutOfRange { max, num_classes });
+        match &self.labels {
+            Some(LabelPlane::Instances { ids, classes }) => {
+                check_instances(ids, classes, self.width(), num_classes)?;
             }
+            Some(labels) if num_classes != 0 => {
+                let max = labels.max_class();
+                if max > num_classes {
+                    return Err(FrameError::LabelOutOfRange { max, num_classes });
+                }
+            }
+            _ => {}
         }
         Ok(census)
     }
+}
+
+/// The instance checks of [`FrameView::check_content`]; the first bad pixel in raster order is reported.
+fn check_instances(ids: &[u16], classes: &[u16], width: usize, num_classes: u16) -> Result<(), FrameError> {
+    let at = |p: usize| (p % width.max(1), p / width.max(1));
+    for (p, &id) in ids.iter().enumerate() {
+        if id == 0 {
+            continue;
+        }
+        let Some(&class) = classes.get(id as usize) else {
+            let (u, v) = at(p);
+            return Err(FrameError::InstanceBeyondTable { id, entries: classes.len(), u, v });
+        };
+        if class == 0 || (num_classes != 0 && class > num_classes) {
+            let (u, v) = at(p);
+            return Err(FrameError::InstanceClassUnknown { id, class, num_classes, u, v });
+        }
+    }
+    Ok(())
 }
 
 /// Why a frame was refused. Each variant is a distinct reason for stats; see
@@ -240,6 +283,18 @@ pub enum FrameError {
     /// A label id above the object set's number of classes.
     #[error("label id {max} exceeds the {num_classes} object classes")]
     LabelOutOfRange { max: u16, num_classes: u16 },
+    /// An instance id with no entry in the instance class table.
+    #[error(
+        "instance id {id} at pixel ({u}, {v}) has no entry in the {entries}-entry instance class table: \
+         send instance_count >= {id} and the instance's class"
+    )]
+    InstanceBeyondTable { id: u16, entries: usize, u: usize, v: usize },
+    /// An instance whose class is 0 or above the object set's number of classes.
+    #[error(
+        "instance {id} at pixel ({u}, {v}) has class {class}, not one of the object classes 1..={num_classes} \
+         (0 = any): set its class table entry to the object's class id"
+    )]
+    InstanceClassUnknown { id: u16, class: u16, num_classes: u16, u: usize, v: usize },
 }
 
 impl FrameError {
@@ -257,6 +312,8 @@ impl FrameError {
             FrameError::DepthEmpty => 8,
             FrameError::DepthNonFinite { .. } => 9,
             FrameError::LabelOutOfRange { .. } => 10,
+            FrameError::InstanceBeyondTable { .. } => 11,
+            FrameError::InstanceClassUnknown { .. } => 12,
         }
     }
 
@@ -273,6 +330,8 @@ impl FrameError {
             FrameError::DepthEmpty => "depth_empty",
             FrameError::DepthNonFinite { .. } => "depth_non_finite",
             FrameError::LabelOutOfRange { .. } => "label_out_of_range",
+            FrameError::InstanceBeyondTable { .. } => "instance_beyond_table",
+            FrameError::InstanceClassUnknown { .. } => "instance_class_unknown",
         }
     }
 }
@@ -405,9 +464,11 @@ mod tests {
             FrameError::DepthEmpty,
             FrameError::DepthNonFinite { values: 1 },
             FrameError::LabelOutOfRange { max: 9, num_classes: 3 },
+            FrameError::InstanceBeyondTable { id: 5, entries: 3, u: 0, v: 0 },
+            FrameError::InstanceClassUnknown { id: 1, class: 0, num_classes: 3, u: 0, v: 0 },
         ];
         let codes: Vec<u16> = all.iter().map(FrameError::reason_code).collect();
-        assert_eq!(codes, vec![1, 2, 3, 4, 5, 6, 7, 8, 9, 10]);
+        assert_eq!(codes, vec![1, 2, 3, 4, 5, 6, 7, 8, 9, 10, 11, 12]);
         let mut names: Vec<&str> = all.iter().map(FrameError::reason).collect();
         names.sort();
         names.dedup();
@@ -438,6 +499,45 @@ mod tests {
         labelled.labels[7] = 4;
         assert_eq!(frame(&labelled).check_content(3), Err(FrameError::LabelOutOfRange { max: 4, num_classes: 3 }));
         assert!(frame(&labelled).check_content(0).is_ok());
+    }
+
+    #[test]
+    fn instance_planes_give_classes_and_their_own_content_errors() {
+        let p = planes();
+        let mut ids = vec![0u16; 48];
+        ids[9] = 1; // (1, 1)
+        ids[10] = 2; // (2, 1)
+        let classes = [0u16, 3, 3];
+        let mut f = frame(&p);
+        f.labels = Some(LabelPlane::Instances { ids: &ids, classes: &classes });
+        let labels = f.labels.unwrap();
+        assert!(labels.is_instances());
+        assert_eq!((labels.class_at(9), labels.class_at(10), labels.class_at(0), labels.class_at(99)), (3, 3, 0, 0));
+        assert_eq!(labels.max_class(), 3);
+        assert_eq!(f.validate(), Ok(()));
+        assert!(f.check_content(3).is_ok());
+        // Class 3 is beyond a 2-class object set; with no limit (0) it passes.
+        assert_eq!(
+            f.check_content(2),
+            Err(FrameError::InstanceClassUnknown { id: 1, class: 3, num_classes: 2, u: 1, v: 1 })
+        );
+        assert!(f.check_content(0).is_ok());
+        // An instance without a class (entry 0) is refused even without a limit.
+        let no_class = [0u16, 3, 0];
+        f.labels = Some(LabelPlane::Instances { ids: &ids, classes: &no_class });
+        assert_eq!(
+            f.check_content(0),
+            Err(FrameError::InstanceClassUnknown { id: 2, class: 0, num_classes: 0, u: 2, v: 1 })
+        );
+        // An id past the table.
+        let mut past = ids.clone();
+        past[20] = 7; // (4, 2)
+        f.labels = Some(LabelPlane::Instances { ids: &past, classes: &classes });
+        assert_eq!(f.check_content(3), Err(FrameError::InstanceBeyondTable { id: 7, entries: 3, u: 4, v: 2 }));
+        assert_eq!(f.labels.unwrap().class_at(20), 0);
+        // The id plane is checked for its size like any label plane.
+        f.labels = Some(LabelPlane::Instances { ids: &ids[1..], classes: &classes });
+        assert_eq!(f.validate(), Err(FrameError::PlaneSize { plane: "labels", got: 47, expected: 48 }));
     }
 
     #[test]

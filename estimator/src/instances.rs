@@ -1,18 +1,31 @@
-//! Object instances from a class-id label plane: connected components per class.
+//! Object instances from a label plane.
 //!
+//! **Class planes** (class id per pixel): connected components per class.
 //! Connectivity is **4-connected** (left, right, up, down): two pixels belong
 //! to the same instance when they share an edge and carry the same class id.
 //! Diagonal-only contact does not join instances, so two touching objects of
-//! one class that meet only at a corner stay separate.
+//! one class that meet only at a corner stay separate, but two that share an
+//! edge become one region (only an instance plane can tell them apart).
 //!
-//! Components smaller than `min_pixels` are dropped, at most `max_instances`
-//! are kept (largest first; ties keep raster order of their first pixel), and
+//! **Instance planes** (instance id per pixel plus a class per id): the
+//! producer's instance ids are authoritative. Every pixel of one instance id
+//! is one instance, whether or not its pixels are connected (an object cut in
+//! two by a nearer one is still one object), and two instance ids are two
+//! instances however they touch. The component id of an instance is its
+//! instance id. Pixels whose instance has no class in 1..=`num_classes`
+//! (class 0, an unknown class, or an id past the class table) are skipped and
+//! counted in [`LabelStats`].
+//!
+//! Either way, components smaller than `min_pixels` are dropped, at most
+//! `max_instances` are kept (largest first; ties keep raster order of their
+//! first pixel for class planes, instance-id order for instance planes), and
 //! class ids above `num_classes` are skipped and counted in [`LabelStats`].
 //!
 //! Allocation: [`InstanceFinder`] keeps a component-id buffer and a flood-fill
-//! stack of `width * height` entries. They are sized on the first frame and
-//! reused; they grow (allocate) only when a frame has more pixels than any
-//! frame before. Frames of a fixed size never allocate after the first.
+//! stack of `width * height` entries, and one tally per instance-table entry.
+//! They are sized on the first frame and reused; they grow (allocate) only
+//! when a frame has more pixels (or a longer instance table) than any frame
+//! before. Frames of a fixed size never allocate after the first.
 
 use crate::frame::LabelPlane;
 
@@ -52,6 +65,18 @@ pub struct LabelStats {
     pub over_max_instances: u32,
 }
 
+/// Pixel count and bounding box of one instance id while a plane is scanned.
+#[derive(Clone, Copy, Debug)]
+struct Tally {
+    pixels: u32,
+    /// [u_min, v_min, u_max, v_max] inclusive.
+    bbox: [u16; 4],
+}
+
+impl Tally {
+    const EMPTY: Tally = Tally { pixels: 0, bbox: [u16::MAX, u16::MAX, 0, 0] };
+}
+
 /// Reusable buffers for connected-component labelling.
 #[derive(Debug, Default)]
 pub struct InstanceFinder {
@@ -61,6 +86,8 @@ pub struct InstanceFinder {
     stack: Vec<u32>,
     /// Kept components, sorted by pixel count, descending.
     kept: Vec<Component>,
+    /// Instance planes: one tally per instance-table entry.
+    tallies: Vec<Tally>,
     width: usize,
     height: usize,
     stats: LabelStats,
@@ -106,6 +133,10 @@ impl InstanceFinder {
         if self.stack.capacity() < n {
             self.stack.reserve(n - self.stack.len());
         }
+        if let LabelPlane::Instances { ids, classes } = labels {
+            self.find_instances(ids, classes, limits);
+            return &self.kept;
+        }
         let mut next_id: u32 = 1;
         for start in 0..n {
             let class_id = labels.class_at(start);
@@ -122,6 +153,40 @@ impl InstanceFinder {
             self.offer(component, limits);
         }
         &self.kept
+    }
+
+    /// One instance per instance id (see the module doc): one pass tallies
+    /// pixels and boxes per id, then the ids are offered in id order.
+    fn find_instances(&mut self, ids: &[u16], classes: &[u16], limits: InstanceLimits) {
+        self.tallies.clear();
+        // Keeps its capacity: allocates only for a longer table than any before.
+        self.tallies.resize(classes.len(), Tally::EMPTY);
+        let w = self.width;
+        let clamp = |x: usize| x.min(u16::MAX as usize) as u16;
+        for (p, &id) in ids.iter().enumerate().take(self.ids.len()) {
+            if id == 0 {
+                continue;
+            }
+            let class_id = classes.get(id as usize).copied().unwrap_or(0);
+            if class_id == 0 || (limits.num_classes != 0 && class_id > limits.num_classes) {
+                self.stats.unknown_class_pixels += 1;
+                self.stats.max_unknown_class = self.stats.max_unknown_class.max(class_id);
+                continue;
+            }
+            self.ids[p] = id as u32;
+            let (u, v) = (clamp(p % w), clamp(p / w));
+            let t = &mut self.tallies[id as usize];
+            t.pixels += 1;
+            t.bbox = [t.bbox[0].min(u), t.bbox[1].min(v), t.bbox[2].max(u), t.bbox[3].max(v)];
+        }
+        // `tallies` has one entry per table entry.
+        for (id, &class_id) in classes.iter().enumerate().skip(1) {
+            let t = self.tallies[id];
+            if t.pixels > 0 {
+                let component = Component { class_id, component_id: id as u32, pixels: t.pixels, bbox: t.bbox };
+                self.offer(component, limits);
+            }
+        }
     }
 
     /// The components kept by the last [`find`](Self::find), largest first.
@@ -149,7 +214,8 @@ impl InstanceFinder {
     /// united and `from` leaves the kept list. Kept components are re-sorted
     /// largest first (ties by component id, i.e. raster order). Returns false,
     /// changing nothing, when either id is not kept or they are equal or of
-    /// different classes.
+    /// different classes. (`Workspace` never joins the instances of an
+    /// instance plane: they are the producer's.)
     pub fn join(&mut self, into: u32, from: u32) -> bool {
         let (Some(i), Some(f)) = (
             self.kept.iter().position(|c| c.component_id == into),
@@ -358,6 +424,96 @@ mod tests {
         let mut f = InstanceFinder::new();
         assert_eq!(f.find(&LabelPlane::U8(&a), w, h, limits(1, 4, 0)).len(), 1);
         assert_eq!(f.find(&LabelPlane::U8(&b), w, h, limits(1, 4, 0)).len(), 0);
+        assert!(f.component_ids().iter().all(|&i| i == 0));
+    }
+
+    /// Paints a rectangle [u0, u1] x [v0, v1] inclusive into a u16 plane.
+    fn paint16(plane: &mut [u16], w: usize, rect: [usize; 4], value: u16) {
+        for v in rect[1]..=rect[3] {
+            for u in rect[0]..=rect[2] {
+                plane[v * w + u] = value;
+            }
+        }
+    }
+
+    #[test]
+    fn touching_instances_of_one_class_stay_apart() {
+        let (w, h) = (20, 10);
+        let mut ids = vec![0u16; w * h];
+        paint16(&mut ids, w, [2, 2, 7, 6], 1); // 30 px
+        paint16(&mut ids, w, [8, 2, 12, 6], 2); // 25 px, sharing an edge with instance 1
+        let classes = [0u16, 4, 4];
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::Instances { ids: &ids, classes: &classes }, w, h, limits(1, 8, 0)).to_vec();
+        assert_eq!(found.len(), 2);
+        assert_eq!(
+            (found[0].class_id, found[0].component_id, found[0].pixels, found[0].bbox),
+            (4, 1, 30, [2, 2, 7, 6])
+        );
+        assert_eq!(
+            (found[1].class_id, found[1].component_id, found[1].pixels, found[1].bbox),
+            (4, 2, 25, [8, 2, 12, 6])
+        );
+        assert_eq!(f.component_ids()[2 * w + 8], 2);
+        // The same pixels as a class plane: one region.
+        let class_plane: Vec<u16> = ids.iter().map(|&i| classes[i as usize]).collect();
+        let found = f.find(&LabelPlane::U16(&class_plane), w, h, limits(1, 8, 0)).to_vec();
+        assert_eq!(found.len(), 1);
+        assert_eq!((found[0].pixels, found[0].bbox), (55, [2, 2, 12, 6]));
+    }
+
+    #[test]
+    fn an_instance_split_by_an_occluder_stays_one_instance() {
+        let (w, h) = (20, 10);
+        let mut ids = vec![0u16; w * h];
+        paint16(&mut ids, w, [1, 1, 16, 4], 3); // instance 3 ...
+        paint16(&mut ids, w, [7, 0, 9, 9], 1); // ... cut in two by instance 1 in front
+        let classes = [0u16, 2, 0, 5];
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::Instances { ids: &ids, classes: &classes }, w, h, limits(1, 8, 0)).to_vec();
+        assert_eq!(found.len(), 2);
+        let cut = found.iter().find(|c| c.component_id == 3).unwrap();
+        assert_eq!((cut.class_id, cut.pixels, cut.bbox), (5, 13 * 4, [1, 1, 16, 4]));
+        let ids_of_3 = f.component_ids().iter().filter(|&&i| i == 3).count();
+        assert_eq!(ids_of_3, 52);
+        assert_eq!((f.component_ids()[w + 1], f.component_ids()[w + 16]), (3, 3));
+    }
+
+    #[test]
+    fn instances_without_a_known_class_are_skipped_and_counted() {
+        let (w, h) = (10, 4);
+        let mut ids = vec![0u16; w * h];
+        paint16(&mut ids, w, [0, 0, 1, 1], 1); // class 2: kept
+        paint16(&mut ids, w, [3, 0, 3, 2], 2); // class 0: no class
+        paint16(&mut ids, w, [5, 0, 5, 1], 3); // class 9 > 3
+        paint16(&mut ids, w, [7, 0, 9, 0], 8); // past the 4-entry table
+        let classes = [0u16, 2, 0, 9];
+        let mut f = InstanceFinder::new();
+        let found = f.find(&LabelPlane::Instances { ids: &ids, classes: &classes }, w, h, limits(1, 8, 3)).to_vec();
+        assert_eq!(found.len(), 1);
+        assert_eq!((found[0].class_id, found[0].component_id, found[0].pixels), (2, 1, 4));
+        assert_eq!(f.stats().unknown_class_pixels, 3 + 2 + 3);
+        assert_eq!(f.stats().max_unknown_class, 9);
+        assert!(f.component_ids()[3] == 0 && f.component_ids()[7] == 0);
+    }
+
+    #[test]
+    fn instance_limits_keep_the_largest_and_break_ties_by_id() {
+        let (w, h) = (30, 4);
+        let mut ids = vec![0u16; w * h];
+        paint16(&mut ids, w, [0, 0, 1, 1], 4); // 4 px
+        paint16(&mut ids, w, [5, 0, 6, 1], 2); // 4 px
+        paint16(&mut ids, w, [10, 0, 12, 3], 1); // 12 px
+        paint16(&mut ids, w, [20, 0, 20, 0], 3); // 1 px
+        let classes = [0u16, 1, 1, 1, 1];
+        let mut f = InstanceFinder::new();
+        let plane = LabelPlane::Instances { ids: &ids, classes: &classes };
+        let found = f.find(&plane, w, h, limits(2, 2, 0)).to_vec();
+        assert_eq!(found.iter().map(|c| c.component_id).collect::<Vec<_>>(), vec![1, 2]);
+        assert_eq!((f.stats().small_components, f.stats().over_max_instances), (1, 1));
+        // A frame with a shorter table and no instances forgets everything.
+        let empty = vec![0u16; w * h];
+        assert!(f.find(&LabelPlane::Instances { ids: &empty, classes: &[0] }, w, h, limits(1, 4, 0)).is_empty());
         assert!(f.component_ids().iter().all(|&i| i == 0));
     }
 }

@@ -19,6 +19,7 @@ pub mod poses;
 pub mod sampling;
 pub mod seg;
 pub mod tracking;
+pub mod verify;
 pub mod workspace;
 
 pub use frame::{ColorFormat, DepthCensus, DepthPlane, FrameError, FrameView, LabelPlane};

@@ -8,7 +8,9 @@
 //! one lies within the class's extent (its diameter, metres) of every point
 //! of the other. Two objects of one class farther apart than that stay two
 //! instances; two that nearly touch can still be joined, which is the price
-//! of a class-label plane.
+//! of a class-label plane. Instance-label planes never come here: their
+//! instance ids are the producer's and already whole (`Workspace::prepare`
+//! skips joining for them).
 //!
 //! The test runs on up to [`SAMPLES`] points per region, taken at an even
 //! stride over its valid-depth pixels. Buffers are sized in

@@ -58,6 +58,11 @@ impl PoseSet {
         before - self.poses.len()
     }
 
+    /// Keeps the poses for which `keep` is true, visiting them in order once each. No allocation.
+    pub fn retain(&mut self, keep: impl FnMut(&ObjectPose) -> bool) {
+        self.poses.retain(keep);
+    }
+
     pub fn as_slice(&self) -> &[ObjectPose] {
         &self.poses
     }

@@ -1,7 +1,8 @@
 //! Preallocated per-frame buffers: instances, sampled points, colour crops.
 //!
 //! [`Workspace::prepare`] runs frame validation → instances (connected
-//! components of the label plane, see [`crate::instances`]) → per instance:
+//! components of a class plane, or one instance per instance id of an
+//! instance plane; see [`crate::instances`]) → per instance:
 //! N sampled valid-depth pixels back-projected to points, an S×S normalised
 //! colour crop, and each point's crop cell (see [`crate::sampling`]).
 //!
@@ -175,7 +176,9 @@ impl Workspace {
         };
         self.finder.find(&labels, w, h, limits);
         self.stats.labels = self.finder.stats();
-        if let Some(joiner) = &mut self.joiner {
+        // An instance plane's instances are the producer's: never joined (each
+        // instance id is already whole, however its pixels are split).
+        if let Some(joiner) = self.joiner.as_mut().filter(|_| !labels.is_instances()) {
             self.stats.joined_parts = joiner.join(&mut self.finder, frame);
         }
         if self.candidates.capacity() < w * h {
@@ -190,8 +193,9 @@ impl Workspace {
         Ok(self.instances.len())
     }
 
-    /// From the next frame on, joins regions of one class into one instance
-    /// when their points fit inside one object (see [`crate::parts`]):
+    /// From the next frame on, joins regions of one class of a class plane into
+    /// one instance when their points fit inside one object (see [`crate::parts`];
+    /// instance planes are never joined):
     /// `extents[k]` is the largest distance in metres between two points of
     /// class id k + 1 (its diameter). An empty slice turns joining off.
     /// Allocates; call it at start-up, not per frame.
@@ -455,5 +459,41 @@ mod tests {
             bad(WorkspaceConfig { crop_margin: f32::NAN, ..base }),
             Some(WorkspaceConfigError::CropMargin(_))
         ));
+    }
+
+    #[test]
+    fn instance_planes_are_never_joined_and_keep_split_instances_whole() {
+        // Two touching instances of class 1 (a 20x10 block split at u = 15),
+        // and instance 3 of class 2 in two pieces left and right of them.
+        let s = scene();
+        let mut ids = vec![0u16; W * H];
+        for v in 0..H {
+            for u in 0..W {
+                let p = v * W + u;
+                if s.labels[p] == 1 {
+                    ids[p] = if u < 15 { 1 } else { 2 };
+                } else if (30..34).contains(&v) && (u < 3 || (50..54).contains(&u)) {
+                    ids[p] = 3;
+                }
+            }
+        }
+        let classes = [0u16, 1, 1, 2];
+        let mut f = frame(&s);
+        f.labels = Some(LabelPlane::Instances { ids: &ids, classes: &classes });
+        let mut ws = Workspace::new(WorkspaceConfig { min_pixels: 10, ..config() }).unwrap();
+        // Extents that would join anything of one class.
+        ws.join_parts(&[10.0, 10.0]);
+        assert_eq!(ws.prepare(&f, 1).unwrap(), 3);
+        assert_eq!(ws.stats().joined_parts, 0);
+        let mut got: Vec<(u16, u32, [u16; 4])> = ws.instances.iter().map(|i| (i.class_id, i.pixels, i.bbox)).collect();
+        got.sort();
+        assert_eq!(got, vec![(1, 100, [5, 5, 14, 14]), (1, 100, [15, 5, 24, 14]), (2, 28, [0, 30, 53, 33])]);
+        // The same frame as a class plane: the touching pair is one region.
+        let classes_plane: Vec<u8> = (0..W * H).map(|p| classes[ids[p] as usize] as u8).collect();
+        f.labels = Some(LabelPlane::U8(&classes_plane));
+        ws.join_parts(&[]);
+        let n = ws.prepare(&f, 1).unwrap();
+        assert_eq!(ws.instances[0].pixels, 200);
+        assert_eq!(n, 3, "class plane: the block, and the two class-2 pieces apart");
     }
 }

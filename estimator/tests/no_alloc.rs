@@ -11,7 +11,7 @@ use std::cell::Cell;
 
 use common::{l_block, object_set, render, step_block};
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
-use fusepose_estimator::{Estimator, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_estimator::{Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
@@ -117,4 +117,60 @@ fn split(mut frame: common::SyntheticFrame) -> common::SyntheticFrame {
         }
     }
     frame
+}
+
+/// The frame's labels as an instance plane: label value k becomes instance id k.
+fn instance_ids(frame: &common::SyntheticFrame) -> Vec<u16> {
+    frame.labels.iter().map(|&l| l as u16).collect()
+}
+
+#[test]
+fn instance_planes_do_not_allocate_after_warm_up() {
+    let (l, s) = (l_block(), step_block());
+    let objects = object_set(&[l.clone(), s.clone()]);
+    let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+    let mut ws = Workspace::new(WorkspaceConfig { num_classes: 2, ..Default::default() }).unwrap();
+    ws.join_parts(&fusepose_estimator::parts::extents(&objects, 1.0));
+    let mut out = PoseSet::with_capacity(8);
+    // Instances 1 and 2 are both L blocks (class 1); 3 is the step block.
+    let classes = [0u16, 1, 1, 2];
+
+    let warm = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [-0.05, 0.0, 0.5]))]);
+    let warm_ids = instance_ids(&warm);
+    let view = FrameView { labels: Some(LabelPlane::Instances { ids: &warm_ids, classes: &classes }), ..warm.view() };
+    assert_eq!(ws.prepare(&view, 0).unwrap(), 1);
+    icp.estimate(&view, &mut ws, &mut out).unwrap();
+
+    // Two identical objects side by side (touching in the image), then all three,
+    // then one L block cut in two by a cleared column: still one instance.
+    let frames = [
+        render(&[
+            (1, &l, pose([0.0, 0.0, 1.0], 10.0, [-0.04, 0.0, 0.5])),
+            (2, &l, pose([0.0, 0.0, 1.0], 10.0, [0.04, 0.0, 0.5])),
+        ]),
+        render(&[
+            (1, &l, pose([0.2, 1.0, 0.0], 80.0, [-0.08, 0.02, 0.55])),
+            (2, &l, pose([1.0, 0.0, 0.0], 40.0, [0.0, -0.03, 0.5])),
+            (3, &s, pose([1.0, 1.0, 0.0], 140.0, [0.08, -0.01, 0.5])),
+        ]),
+        split(render(&[(2, &l, pose([0.0, 1.0, 0.0], 20.0, [0.0, 0.0, 0.5]))])),
+    ];
+    let expected = [2, 3, 1];
+    for (i, frame) in frames.iter().enumerate() {
+        let ids = instance_ids(frame);
+        let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..frame.view() };
+        let mut prepared = 0;
+        let n = allocations_in(|| {
+            prepared = ws.prepare(&view, 100 + i as u64).unwrap();
+            icp.estimate(&view, &mut ws, &mut out).unwrap();
+        });
+        assert_eq!(n, 0, "frame {i}: {n} allocations in prepare + estimate");
+        assert_eq!(prepared, expected[i], "frame {i}");
+        assert_eq!(out.len(), prepared, "every instance got a pose");
+        assert_eq!(ws.stats().joined_parts, 0, "instance planes are never joined");
+        if i == 0 {
+            // The touching pair: same class, two instances.
+            assert!(ws.instances.iter().all(|inst| inst.class_id == 1));
+        }
+    }
 }

@@ -78,11 +78,17 @@ pub fn parse_header(b: &[u8; HEADER_LEN]) -> FrameHeader {
     let height = u32::from_le_bytes(take(4).try_into().unwrap());
     let depth_scale = f32::from_le_bytes(take(4).try_into().unwrap());
     let codes: [u8; 4] = take(4).try_into().unwrap();
-    let _reserved = u32::from_le_bytes(take(4).try_into().unwrap());
-    let mut u64s = [0u64; 12];
+    let instance_count = u16::from_le_bytes(take(2).try_into().unwrap());
+    let _reserved = u16::from_le_bytes(take(2).try_into().unwrap());
+    let mut u64s = [0u64; 6];
     for v in &mut u64s {
         *v = u64::from_le_bytes(take(8).try_into().unwrap());
     }
+    let mut u32s = [0u32; 8];
+    for v in &mut u32s {
+        *v = u32::from_le_bytes(take(4).try_into().unwrap());
+    }
+    let _reserved_end: [u8; 16] = take(16).try_into().unwrap();
     let f = f64::from_bits;
     FrameHeader {
         magic,
@@ -96,6 +102,7 @@ pub fn parse_header(b: &[u8; HEADER_LEN]) -> FrameHeader {
         depth_format: codes[1],
         has_labels: codes[2],
         label_format: codes[3],
+        instance_count,
         _reserved,
         sequence: u64s[0],
         capture_time_ns: u64s[1],
@@ -103,9 +110,11 @@ pub fn parse_header(b: &[u8; HEADER_LEN]) -> FrameHeader {
         fy: f(u64s[3]),
         cx: f(u64s[4]),
         cy: f(u64s[5]),
-        color: PlaneRef { offset: u64s[6], len: u64s[7] },
-        depth: PlaneRef { offset: u64s[8], len: u64s[9] },
-        labels: PlaneRef { offset: u64s[10], len: u64s[11] },
+        color: PlaneRef { offset: u32s[0], len: u32s[1] },
+        depth: PlaneRef { offset: u32s[2], len: u32s[3] },
+        labels: PlaneRef { offset: u32s[4], len: u32s[5] },
+        instance_classes: PlaneRef { offset: u32s[6], len: u32s[7] },
+        _reserved_end,
     }
 }
 
@@ -113,9 +122,11 @@ pub fn parse_header(b: &[u8; HEADER_LEN]) -> FrameHeader {
 const _: () = {
     use std::mem::offset_of;
     assert!(offset_of!(FrameHeader, depth_scale) == 20 && offset_of!(FrameHeader, color_format) == 24);
-    assert!(offset_of!(FrameHeader, _reserved) == 28 && offset_of!(FrameHeader, sequence) == 32);
+    assert!(offset_of!(FrameHeader, instance_count) == 28 && offset_of!(FrameHeader, _reserved) == 30);
+    assert!(offset_of!(FrameHeader, sequence) == 32);
     assert!(offset_of!(FrameHeader, fx) == 48 && offset_of!(FrameHeader, cy) == 72);
-    assert!(offset_of!(FrameHeader, color) == 80 && offset_of!(FrameHeader, labels) == 112);
+    assert!(offset_of!(FrameHeader, color) == 80 && offset_of!(FrameHeader, labels) == 96);
+    assert!(offset_of!(FrameHeader, instance_classes) == 104 && offset_of!(FrameHeader, _reserved_end) == 112);
     assert!(std::mem::size_of::<FrameHeader>() == HEADER_LEN);
 };
 
@@ -130,14 +141,16 @@ pub fn header_bytes(h: &FrameHeader) -> [u8; HEADER_LEN] {
     out.extend_from_slice(&h.height.to_le_bytes());
     out.extend_from_slice(&h.depth_scale.to_le_bytes());
     out.extend_from_slice(&[h.color_format, h.depth_format, h.has_labels, h.label_format]);
+    out.extend_from_slice(&h.instance_count.to_le_bytes());
     out.extend_from_slice(&h._reserved.to_le_bytes());
     for v in [h.sequence, h.capture_time_ns, h.fx.to_bits(), h.fy.to_bits(), h.cx.to_bits(), h.cy.to_bits()] {
         out.extend_from_slice(&v.to_le_bytes());
     }
-    for p in [h.color, h.depth, h.labels] {
+    for p in [h.color, h.depth, h.labels, h.instance_classes] {
         out.extend_from_slice(&p.offset.to_le_bytes());
         out.extend_from_slice(&p.len.to_le_bytes());
     }
+    out.extend_from_slice(&h._reserved_end);
     out.try_into().expect("header is 128 bytes")
 }
 
@@ -182,6 +195,9 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
     ws.join_parts(&[0.25; 5]);
     let result = ws.prepare(&view, header.sequence);
     check_workspace(&ws, &view, &result);
+    if view.labels.is_some_and(|l| l.is_instances()) {
+        assert_eq!(ws.stats().joined_parts, 0, "an instance plane's instances were joined");
+    }
     match &content {
         Err(FrameError::DepthEmpty | FrameError::DepthNonFinite { .. }) => {
             assert!(ws.instances.is_empty(), "instances without a single depth reading")
@@ -189,6 +205,11 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
         Err(FrameError::LabelOutOfRange { .. }) => assert!(
             result.is_err() || ws.stats().labels.unknown_class_pixels > 0,
             "check_content saw an unknown label, prepare did not"
+        ),
+        // Pixels of an instance without a class (or past the table) are skipped by prepare.
+        Err(FrameError::InstanceBeyondTable { .. } | FrameError::InstanceClassUnknown { .. }) => assert!(
+            result.is_err() || ws.stats().labels.unknown_class_pixels > 0,
+            "check_content saw an instance without a known class, prepare did not"
         ),
         Err(e) => panic!("check_content gave an unexpected error: {e}"),
         Ok(census) => assert!(census.valid > 0),
@@ -268,6 +289,28 @@ pub fn seed_frame(f: SeedFormat) -> Vec<u8> {
 
 /// [`seed_frame`] with every depth value passed through `depth(pixel, metres)`.
 pub fn seed_frame_with(f: SeedFormat, depth_of: impl Fn(usize, f32) -> f32) -> Vec<u8> {
+    use fusepose_client::LabelFormat as L;
+    let labels = f.labels.map(|wide| if wide { L::U16 } else { L::U8 });
+    build_seed(f, labels, &[], depth_of)
+}
+
+/// A well-formed instance-label frame with the objects of [`seed_frame`]
+/// (u16 depth): the class-1 rectangle as two touching instances 1 (left
+/// column) and 2, the class-2 rectangle as instance 3, the class-3 one as
+/// instance 4. `classes` is the instance class table sent (entry `id` =
+/// class of instance `id`); `[0, 1, 1, 2, 3]` matches the class frame.
+pub fn seed_instance_frame(width: u32, height: u32, classes: &[u16]) -> Vec<u8> {
+    let max_instances = classes.len().saturating_sub(1) as u16;
+    let f = SeedFormat { width, height, depth_f32: false, labels: Some(true) };
+    build_seed(f, Some(fusepose_client::LabelFormat::InstanceU16 { max_instances }), classes, |_, m| m)
+}
+
+fn build_seed(
+    f: SeedFormat,
+    label_format: Option<fusepose_client::LabelFormat>,
+    classes: &[u16],
+    depth_of: impl Fn(usize, f32) -> f32,
+) -> Vec<u8> {
     use fusepose_client::{ColorFormat as C, DepthFormat as D, FrameLayout, LabelFormat as L};
     let layout = FrameLayout {
         width: f.width,
@@ -275,7 +318,7 @@ pub fn seed_frame_with(f: SeedFormat, depth_of: impl Fn(usize, f32) -> f32) -> V
         color_format: C::Rgb8,
         depth_format: if f.depth_f32 { D::F32 } else { D::U16 },
         depth_scale: 0.001,
-        labels: f.labels.map(|wide| if wide { L::U16 } else { L::U8 }),
+        labels: label_format,
     };
     let (w, h) = (f.width as usize, f.height as usize);
     let header = FrameHeader {
@@ -287,6 +330,7 @@ pub fn seed_frame_with(f: SeedFormat, depth_of: impl Fn(usize, f32) -> f32) -> V
         ..layout.header(FUZZ_CAMERA_ID)
     };
     let [color, depth, labels] = layout.planes();
+    let table = layout.instance_classes();
     let mut payload = vec![0u8; layout.payload_len()];
     let class_at = |u: usize, v: usize| -> u16 {
         if u >= 1 && u < w / 2 && v >= 1 && v < h / 2 {
@@ -297,6 +341,15 @@ pub fn seed_frame_with(f: SeedFormat, depth_of: impl Fn(usize, f32) -> f32) -> V
             3
         } else {
             0
+        }
+    };
+    let instance_at = |u: usize, v: usize| -> u16 {
+        match class_at(u, v) {
+            1 if u < w / 4 => 1,
+            1 => 2,
+            2 => 3,
+            3 => 4,
+            _ => 0,
         }
     };
     for v in 0..h {
@@ -314,15 +367,22 @@ pub fn seed_frame_with(f: SeedFormat, depth_of: impl Fn(usize, f32) -> f32) -> V
                 let d = depth.offset as usize + p * 2;
                 payload[d..d + 2].copy_from_slice(&((metres * 1000.0) as u16).to_le_bytes());
             }
-            match f.labels {
-                None => {}
-                Some(false) => payload[labels.offset as usize + p] = class_at(u, v) as u8,
-                Some(true) => {
-                    let l = labels.offset as usize + p * 2;
-                    payload[l..l + 2].copy_from_slice(&class_at(u, v).to_le_bytes());
+            let value = match label_format {
+                None => continue,
+                Some(L::U8) => {
+                    payload[labels.offset as usize + p] = class_at(u, v) as u8;
+                    continue;
                 }
-            }
+                Some(L::U16) => class_at(u, v),
+                Some(L::InstanceU16 { .. }) => instance_at(u, v),
+            };
+            let l = labels.offset as usize + p * 2;
+            payload[l..l + 2].copy_from_slice(&value.to_le_bytes());
         }
+    }
+    for (i, class) in classes.iter().enumerate().take(table.len as usize / 2) {
+        let t = table.offset as usize + i * 2;
+        payload[t..t + 2].copy_from_slice(&class.to_le_bytes());
     }
     let mut out = header_bytes(&header).to_vec();
     out.extend_from_slice(&payload);
@@ -638,6 +698,11 @@ pub fn frame_seeds() -> Vec<(&'static str, Vec<u8>)> {
         }
     }
     let truncated = base[..base.len() - 1].to_vec();
+    let instances = seed_instance_frame(8, 6, &[0, 1, 1, 2, 3]);
+    let edit_instances = |f: &dyn Fn(&mut FrameHeader)| with_header(&instances, f);
+    // The table moved one byte on, inside a payload 8 bytes longer.
+    let mut misaligned_table = edit_instances(&|h| h.instance_classes.offset += 1);
+    misaligned_table.extend_from_slice(&[0; 8]);
     vec![
         ("valid_n3_u16depth_u8labels", base.clone()),
         ("valid_n3_f32depth_u16labels_odd", seed_frame(fmt(7, 5, true, Some(true)))),
@@ -657,7 +722,7 @@ pub fn frame_seeds() -> Vec<(&'static str, Vec<u8>)> {
         ("reject_bad_intrinsics", edit(&|h| h.fx = nan)),
         ("reject_principal_point", edit(&|h| h.cy = 1e9)),
         ("reject_depth_scale", edit(&|h| h.depth_scale = f32::INFINITY)),
-        ("reject_plane_out_of_bounds", edit(&|h| h.labels.offset = u64::MAX - 3)),
+        ("reject_plane_out_of_bounds", edit(&|h| h.labels.offset = u32::MAX - 3)),
         ("reject_plane_length", edit(&|h| h.color.len -= 3)),
         ("reject_plane_misaligned", edit(&|h| h.depth.offset += 1)),
         ("reject_plane_overlap", edit(&|h| h.labels.offset = h.depth.offset)),
@@ -665,6 +730,16 @@ pub fn frame_seeds() -> Vec<(&'static str, Vec<u8>)> {
         ("reject_labels_missing", edit(&|h| h.labels.len = 0)),
         ("refused_all_zero_depth", seed_frame_with(fmt(8, 6, false, Some(false)), |_, _| 0.0)),
         ("refused_all_nan_depth", seed_frame_with(fmt(8, 6, true, Some(false)), |_, _| f32::NAN)),
+        ("valid_n4_instances", instances.clone()),
+        ("valid_n1_instances_wide_512x2", seed_instance_frame(512, 2, &[0, 1, 1, 2, 3])),
+        ("refused_instance_class_unknown", seed_instance_frame(8, 6, &[0, 1, 1, 9, 3])),
+        ("refused_instance_without_class", seed_instance_frame(8, 6, &[0, 1, 0, 2, 3])),
+        ("refused_instance_beyond_table", seed_instance_frame(8, 6, &[0, 1, 1, 2])),
+        ("reject_instance_table_missing", edit_instances(&|h| h.instance_classes = PlaneRef::default())),
+        ("reject_instance_table_length", edit_instances(&|h| h.instance_classes.len -= 2)),
+        ("reject_instance_table_misaligned", misaligned_table),
+        ("reject_instance_without_has_labels", edit_instances(&|h| h.has_labels = 0)),
+        ("reject_instance_count_on_class_labels", edit(&|h| h.instance_count = 2)),
     ]
 }
 
@@ -774,6 +849,7 @@ pub fn seed_seg_config(classes: usize) -> fusepose_estimator::seg::SegConfig {
         input_height: 16,
         enc: [1, 1, 1, 1],
         dec: [1, 1, 1],
+        offsets: false,
     }
 }
 

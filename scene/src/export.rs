@@ -175,9 +175,13 @@ pub fn write_obj(mesh: &Mesh, dir: &Path, stem: &str) -> Result<PathBuf, ExportE
         return Err(ExportError::BadName(stem.to_owned()));
     }
     std::fs::create_dir_all(dir).map_err(io_err(dir))?;
+    let n = mesh.positions.len();
+    let has_uv = mesh.uvs.len() == n && n > 0;
     let mut mtl = String::new();
     for (k, m) in mesh.materials.iter().enumerate() {
-        let [r, g, b] = m.diffuse;
+        // MTL multiplies map_Kd by Kd, and our texture replaces the colour:
+        // a used texture gets Kd 1 so other tools show the texture as is.
+        let [r, g, b] = if m.texture.is_some() && has_uv { [1.0; 3] } else { m.diffuse };
         let _ = writeln!(mtl, "newmtl m{k}\nKa 0 0 0\nKd {r} {g} {b}\nKs 0 0 0\nd 1\nillum 1");
         if let Some(t) = &m.texture {
             let file = format!("{stem}_m{k}.png");
@@ -194,8 +198,6 @@ pub fn write_obj(mesh: &Mesh, dir: &Path, stem: &str) -> Result<PathBuf, ExportE
     let mtl_path = dir.join(format!("{stem}.mtl"));
     std::fs::write(&mtl_path, mtl).map_err(io_err(&mtl_path))?;
 
-    let n = mesh.positions.len();
-    let has_uv = mesh.uvs.len() == n && n > 0;
     let has_normal = mesh.normals.len() == n && n > 0;
     let has_color = mesh.colors.len() == n && n > 0;
     let mut obj = format!("# fusepose object '{stem}', metres\nmtllib {stem}.mtl\no {stem}\n");
@@ -266,7 +268,8 @@ mod tests {
             assert!((lo - object.bbox_min).norm() < 1e-6 && (hi - object.bbox_max).norm() < 1e-6, "{}", object.name);
             let (a, b) = (&mesh.materials[0], &object.mesh.materials[0]);
             assert_eq!(a.texture, b.texture, "{}: texture pixels differ", object.name);
-            assert_eq!(a.diffuse, b.diffuse);
+            // A used texture is written with Kd 1 (MTL multiplies map_Kd by Kd).
+            assert_eq!(a.diffuse, if b.texture.is_some() { [1.0; 3] } else { b.diffuse });
         }
         // The summary reloads with the same names, class ids and symmetries.
         let info: ModelsInfo = serde_json::from_str(&std::fs::read_to_string(&info_path).unwrap()).unwrap();
@@ -281,6 +284,57 @@ mod tests {
                 assert!((x.to_homogeneous() - y.to_homogeneous()).abs().max() < 1e-9, "{}", a.name);
             }
         }
+    }
+
+    /// Renders a mesh head-on, lit by ambient light only, so pixels show the albedo.
+    fn render_albedo(mesh: &Mesh) -> crate::render::RenderTarget {
+        use crate::render::{Lighting, RenderItem, RenderSettings, RenderTarget, render_scene};
+        let k = crate::Intrinsics { fx: 400.0, fy: 400.0, cx: 63.5, cy: 63.5, width: 128, height: 128 };
+        let (lo, hi) = crate::surface::bounding_box(mesh);
+        let size = (hi - lo).norm();
+        let pose = crate::Pose::from_parts(
+            nalgebra::Translation3::new(0.0, 0.0, 2.5 * size),
+            UnitQuaternion::from_euler_angles(0.4, 0.7, 0.2),
+        );
+        let settings = RenderSettings {
+            lighting: Lighting { ambient: [1.0; 3], lights: vec![], points: vec![] },
+            ..Default::default()
+        };
+        let mut t = RenderTarget::for_intrinsics(&k);
+        render_scene(&[RenderItem { mesh, pose, instance_label: 1 }], &k, &settings, &mut t).unwrap();
+        t
+    }
+
+    #[test]
+    fn export_then_load_renders_the_same_colours() {
+        let set = builtin_objects();
+        let dir = temp_dir("mtl-colours");
+        export_objects(&set, &dir).unwrap();
+        for object in &set.objects {
+            let obj = dir.join(&object.name).join(format!("{}.obj", object.name));
+            let mtl = std::fs::read_to_string(obj.with_extension("mtl")).unwrap();
+            assert!(mtl.contains("Kd 1 1 1\nKs") && mtl.contains("map_Kd"), "{}: {mtl}", object.name);
+            let loaded = load_mesh(&obj, 1.0).unwrap();
+            let (a, b) = (render_albedo(&object.mesh), render_albedo(&loaded));
+            assert!(a.labels().iter().filter(|&&l| l != 0).count() > 500, "{} not in view", object.name);
+            assert_eq!(a.labels(), b.labels(), "{}", object.name);
+            let worst = a.rgb().iter().zip(b.rgb()).map(|(x, y)| (*x as i32 - *y as i32).abs()).max().unwrap();
+            assert!(worst <= 1, "{}: colours differ by {worst} after export and load", object.name);
+        }
+        // A user's MTL with Kd 0.5 and a white texture: albedo 0.5 (sRGB 188), as in other tools.
+        let user = temp_dir("mtl-user");
+        std::fs::create_dir_all(&user).unwrap();
+        image::save_buffer(user.join("white.png"), &[255u8; 12], 2, 2, image::ExtendedColorType::Rgb8).unwrap();
+        std::fs::write(user.join("q.mtl"), "newmtl m\nKd 0.5 0.5 0.5\nmap_Kd white.png\n").unwrap();
+        std::fs::write(
+            user.join("q.obj"),
+            "mtllib q.mtl\nv -0.1 -0.1 0\nv 0.1 -0.1 0\nv 0.1 0.1 0\nv -0.1 0.1 0\nvt 0 0\nvt 1 0\nvt 1 1\nvt 0 1\nusemtl m\nf 1/1 2/2 3/3 4/4\n",
+        )
+        .unwrap();
+        let quad = load_mesh(&user.join("q.obj"), 1.0).unwrap();
+        let t = render_albedo(&quad);
+        let i = t.labels().iter().position(|&l| l == 1).unwrap();
+        assert_eq!(&t.rgb()[i * 3..i * 3 + 3], &[188, 188, 188]);
     }
 
     #[test]

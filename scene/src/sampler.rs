@@ -9,11 +9,15 @@
 //! Table frame: origin at the centre of the table top, z up, metres.
 
 pub mod backdrop;
+pub mod distractors;
+mod instances;
 pub mod placement;
+pub mod randomization;
 pub mod viewpoint;
 
 use crate::render::{
-    self, ItemCoverage, Lighting, NoiseConfig, PixelBox, RenderError, RenderItem, RenderSettings, RenderTarget,
+    self, DepthSensor, ItemCoverage, Lighting, NoiseConfig, PixelBox, Randomize, RenderError, RenderItem,
+    RenderSettings, RenderTarget,
 };
 use crate::{Intrinsics, ObjectSet, Pose};
 use backdrop::Backdrop;
@@ -57,6 +61,26 @@ pub struct SamplerConfig {
     pub occlusion_tries: usize,
     /// Camera used to evaluate occlusion (rendered at a quarter resolution).
     pub intrinsics: Intrinsics,
+    /// Domain randomisation (`Off`): lights, textures, walls, distractors,
+    /// border occluders and edge-cut views in [`sample_scene`]; shadows,
+    /// specular highlights, colour jitter, the camera pipeline and intrinsics
+    /// jitter in [`render_view`]. `Off` keeps the pre-randomisation scenes.
+    pub randomize: Randomize,
+    /// The depth-sensor model [`render_view`] applies (`Basic`, the original model).
+    pub depth_sensor: DepthSensor,
+    /// Copies of each drawn class, inclusive range (1, 1); copies are placed
+    /// independently. `min_objects..=max_objects` counts drawn classes.
+    pub instances_per_class: (usize, usize),
+    /// Probability that a scene contains a pair: one drawn class appears as two
+    /// identical copies side by side, `pair_gap_m` apart (0).
+    pub pair_probability: f64,
+    /// Gap between the two copies of a pair (metres, 0..0.003).
+    pub pair_gap_m: (f64, f64),
+    /// Probability that a scene contains a heap: one drawn class appears as
+    /// `heap_size` copies touching each other (gap 0), some lying on top (0).
+    pub heap_probability: f64,
+    /// Copies in a heap, inclusive range (4, 8).
+    pub heap_size: (usize, usize),
 }
 
 impl Default for SamplerConfig {
@@ -76,7 +100,43 @@ impl Default for SamplerConfig {
             target_occlusion: None,
             occlusion_tries: 40,
             intrinsics: Intrinsics::YCB_VIDEO,
+            randomize: Randomize::Off,
+            depth_sensor: DepthSensor::Basic,
+            instances_per_class: (1, 1),
+            pair_probability: 0.0,
+            pair_gap_m: (0.0, 0.003),
+            heap_probability: 0.0,
+            heap_size: (4, 8),
         }
+    }
+}
+
+impl SamplerConfig {
+    /// The recommended training configuration: `Randomize::Default`, the
+    /// structured-light depth sensor, 3–6 classes each appearing once or
+    /// twice, a touching pair in 35 % and a heap of 4–8 copies in 15 % of
+    /// scenes, cameras 0.3–1.5 m from the objects at 8–88° elevation (grazing
+    /// to top-down), roll ±10° and a ±8 cm look-at jitter.
+    pub fn training() -> SamplerConfig {
+        SamplerConfig {
+            min_objects: 3,
+            max_objects: 6,
+            camera_distance_m: (0.3, 1.5),
+            camera_elevation_deg: (8.0, 88.0),
+            camera_max_roll_deg: 10.0,
+            look_at_jitter_m: 0.08,
+            randomize: Randomize::Default,
+            depth_sensor: DepthSensor::StructuredLight,
+            instances_per_class: (1, 2),
+            pair_probability: 0.35,
+            heap_probability: 0.15,
+            ..SamplerConfig::default()
+        }
+    }
+
+    /// Whether the grouped (multi-instance) placement is needed.
+    fn grouped(&self) -> bool {
+        self.instances_per_class != (1, 1) || self.pair_probability > 0.0 || self.heap_probability > 0.0
     }
 }
 
@@ -127,6 +187,13 @@ pub struct Scene {
     /// Lights in the table frame.
     pub lighting: Lighting,
     pub views: Vec<CameraView>,
+    /// The randomisation level the scene was drawn with; [`render_view`]
+    /// applies the per-view randomisation of this level.
+    pub randomize: Randomize,
+    /// The depth-sensor model [`render_view`] applies.
+    pub depth_sensor: DepthSensor,
+    /// Scene-level randomisation content (distractors, …); empty when `Off`.
+    pub extras: randomization::SceneExtras,
 }
 
 /// Ground truth of one object in one rendered frame.
@@ -210,6 +277,21 @@ impl SamplerConfig {
         if self.views == 0 {
             return Err(E("views must be >= 1"));
         }
+        let (i0, i1) = self.instances_per_class;
+        if i0 == 0 || i1 < i0 || i1 > 100 {
+            return Err(E("instances_per_class must be 1 <= min <= max <= 100"));
+        }
+        let (h0, h1) = self.heap_size;
+        if h0 < 2 || h1 < h0 || h1 > 100 {
+            return Err(E("heap_size must be 2 <= min <= max <= 100"));
+        }
+        if !(0.0..=1.0).contains(&self.pair_probability) || !(0.0..=1.0).contains(&self.heap_probability) {
+            return Err(E("pair_probability and heap_probability must be in 0..=1"));
+        }
+        let (g0, g1) = self.pair_gap_m;
+        if !(g0 >= 0.0 && g1 >= g0 && g1 < 0.1) {
+            return Err(E("pair_gap_m must be 0 <= min <= max < 0.1"));
+        }
         if let Some((lo, hi)) = self.target_occlusion {
             if !(0.0..=1.0).contains(&lo) || !(lo..=1.0).contains(&hi) {
                 return Err(E("target_occlusion must be 0 <= lo <= hi <= 1"));
@@ -229,22 +311,41 @@ pub fn sample_scene(set: &ObjectSet, cfg: &SamplerConfig, seed: u64) -> Result<S
         return Err(SamplerError::EmptyObjectSet);
     }
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
+    if cfg.randomize.is_on() {
+        return randomization::sample_randomized(&mut rng, set, cfg, seed);
+    }
     let backdrop = Backdrop::random(&mut rng);
     let lighting = Lighting::random_z_up(&mut rng);
     let rests: Vec<Vec<RestPose>> = set.objects.iter().map(rest_poses).collect();
-    let objects = place_objects(&mut rng, set, &rests, &backdrop, cfg)?;
+    let objects = if cfg.grouped() {
+        instances::place_grouped(&mut rng, set, &rests, backdrop.table_half_extent, cfg)?
+    } else {
+        place_objects(&mut rng, set, &rests, &backdrop, cfg)?
+    };
 
-    let views = draw_views(&mut rng, set, &objects, cfg, cfg.views)?;
-    Ok(Scene { seed, objects, backdrop, lighting, views })
+    let views = draw_views(&mut rng, set, &objects, cfg, cfg.views, None)?;
+    Ok(Scene {
+        seed,
+        objects,
+        backdrop,
+        lighting,
+        views,
+        randomize: cfg.randomize,
+        depth_sensor: cfg.depth_sensor,
+        extras: randomization::SceneExtras::default(),
+    })
 }
 
-/// Draws `count` camera views of `objects` (see [`SamplerConfig`]).
+/// Draws `count` camera views of `objects` (see [`SamplerConfig`]); with
+/// `rules` (randomised scenes) views must keep clear of the scene's solids and
+/// some are turned so an object is cut by the image edge.
 fn draw_views(
     rng: &mut Pcg64Mcg,
     set: &ObjectSet,
     objects: &[PlacedObject],
     cfg: &SamplerConfig,
     count: usize,
+    rules: Option<&randomization::ViewRules>,
 ) -> Result<Vec<CameraView>, SamplerError> {
     let centroid = objects.iter().fold(Vector3::zeros(), |acc, o| acc + o.table_from_object.translation.vector)
         / objects.len().max(1) as f64;
@@ -261,7 +362,10 @@ fn draw_views(
             Vector3::zeros()
         };
         let target = Point3::new(centroid.x, centroid.y, 0.05) + jitter;
-        random_view(rng, &ranges, target)
+        match rules {
+            None => random_view(rng, &ranges, target),
+            Some(r) => r.draw(rng, &ranges, target, objects, &cfg.intrinsics),
+        }
     };
     let mut occlusion = cfg.target_occlusion.map(|range| OcclusionProbe::new(&cfg.intrinsics, range));
     let mut views = Vec::with_capacity(count);
@@ -432,6 +536,12 @@ fn noise_seed(scene_seed: u64, view: usize) -> u64 {
     h ^ (h >> 29)
 }
 
+/// The seed of a view's randomisation (effects, intrinsics jitter), independent
+/// of the noise seed.
+fn view_seed(scene_seed: u64, view: usize) -> u64 {
+    noise_seed(scene_seed ^ 0x005E_ED0F_71E7_5EED, view).rotate_left(23)
+}
+
 impl Scene {
     /// Appends `count` more camera views drawn from `seed` with the camera
     /// rules of `cfg` (distance, elevation, roll, occlusion target), e.g. for
@@ -445,7 +555,8 @@ impl Scene {
     ) -> Result<(), SamplerError> {
         cfg.validate()?;
         let mut rng = Pcg64Mcg::seed_from_u64(seed ^ self.seed.rotate_left(17));
-        let views = draw_views(&mut rng, set, &self.objects, cfg, count)?;
+        let rules = self.extras.view_rules.as_ref();
+        let views = draw_views(&mut rng, set, &self.objects, cfg, count, rules)?;
         self.views.extend(views);
         Ok(())
     }
@@ -457,17 +568,20 @@ impl Scene {
     }
 
     /// The render list of a view: table and room (label 0), then the objects
-    /// (their instance labels) in scene order.
+    /// (their instance labels) in scene order, then distractors (label 0).
     pub fn render_items<'a>(&'a self, set: &'a ObjectSet, view: usize) -> Result<Vec<RenderItem<'a>>, SamplerError> {
         let cam = self
             .views
             .get(view)
             .ok_or(SamplerError::NoSuchView { index: view, count: self.views.len() })?
             .camera_from_table;
-        let mut items = Vec::with_capacity(self.objects.len() + 2);
+        let mut items = Vec::with_capacity(self.objects.len() + 2 + self.extras.distractors.len());
         items.push(RenderItem { mesh: &self.backdrop.table, pose: cam, instance_label: 0 });
         items.push(RenderItem { mesh: &self.backdrop.room, pose: cam, instance_label: 0 });
         push_object_items(set, &self.objects, &cam, &mut items)?;
+        for d in &self.extras.distractors {
+            items.push(RenderItem { mesh: &d.mesh, pose: cam * d.table_from_object, instance_label: 0 });
+        }
         Ok(items)
     }
 }
@@ -475,8 +589,46 @@ impl Scene {
 /// Number of background items [`Scene::render_items`] puts before the objects.
 const BACKGROUND_ITEMS: usize = 2;
 
+/// Per-call options of [`render_view_with`].
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct ViewOptions {
+    /// The target camera. With randomisation on, fx and fy are jittered per
+    /// view (±5 %, `Strong` ±8 %) and cx, cy (±10 px, `Strong` ±20 px);
+    /// [`FrameTruth::intrinsics`] reports the camera actually used.
+    pub intrinsics: Intrinsics,
+    /// Depth model: `Ideal` leaves depth exact, `Basic` is the original model.
+    pub depth_sensor: DepthSensor,
+    /// Per-view randomisation level (shadows, specular, colour jitter, camera
+    /// pipeline, intrinsics jitter, border occluders). Scene-level content
+    /// (lights, textures, distractors) comes from the scene as sampled.
+    pub randomize: Randomize,
+}
+
+impl ViewOptions {
+    /// The scene's own randomisation level and depth sensor, camera `k`.
+    pub fn for_scene(scene: &Scene, k: &Intrinsics) -> ViewOptions {
+        ViewOptions { intrinsics: *k, depth_sensor: scene.depth_sensor, randomize: scene.randomize }
+    }
+}
+
+/// How the depth of a frame is corrupted.
+#[derive(Clone, Copy, Debug)]
+enum DepthNoise<'a> {
+    Exact,
+    Basic(&'a NoiseConfig),
+    Sensor(DepthSensor),
+}
+
 /// Renders view `view` of `scene` into `target` (instance labels), applies
-/// `noise` (seeded from the scene seed and view index) and returns the truth.
+/// sensor noise and returns the truth.
+///
+/// With the scene drawn at `Randomize::Off` and `DepthSensor::Basic` this is
+/// the original renderer: `noise` applied with a seed from the scene seed and
+/// view index. Otherwise the scene's randomisation level and depth sensor
+/// apply (see [`render_view_with`]); `noise` then only switches noise off
+/// (`enabled == false`: exact depth, no colour noise) or, for the `Basic`
+/// sensor, gives its parameters. `k` is the target camera; the truth reports
+/// the (possibly jittered) camera actually used.
 pub fn render_view(
     scene: &Scene,
     set: &ObjectSet,
@@ -485,18 +637,98 @@ pub fn render_view(
     noise: &NoiseConfig,
     target: &mut RenderTarget,
 ) -> Result<FrameTruth, SamplerError> {
-    let items = scene.render_items(set, view)?;
+    let depth = if !noise.enabled {
+        DepthNoise::Exact
+    } else if scene.depth_sensor == DepthSensor::Basic {
+        DepthNoise::Basic(noise)
+    } else {
+        DepthNoise::Sensor(scene.depth_sensor)
+    };
+    render_view_inner(scene, set, view, k, scene.randomize, depth, noise.enabled.then_some(noise), target)
+}
+
+/// Renders view `view` of `scene` with explicit options: the randomisation
+/// level and depth sensor of `opts` instead of the scene's. With
+/// `Randomize::Off` colour gets the original blur and noise
+/// (`NoiseConfig::default()`); otherwise the randomised camera pipeline.
+/// `Off` + `Basic` equals `render_view(.., &NoiseConfig::default(), ..)`.
+pub fn render_view_with(
+    scene: &Scene,
+    set: &ObjectSet,
+    view: usize,
+    opts: &ViewOptions,
+    target: &mut RenderTarget,
+) -> Result<FrameTruth, SamplerError> {
+    let basic = NoiseConfig::default();
+    let depth = match opts.depth_sensor {
+        DepthSensor::Ideal => DepthNoise::Exact,
+        DepthSensor::Basic => DepthNoise::Basic(&basic),
+        other => DepthNoise::Sensor(other),
+    };
+    render_view_inner(scene, set, view, &opts.intrinsics, opts.randomize, depth, Some(&basic), target)
+}
+
+/// Index of the first item after the objects in a view's render list.
+fn first_non_object(scene: &Scene) -> usize {
+    BACKGROUND_ITEMS + scene.objects.len()
+}
+
+#[allow(clippy::too_many_arguments)] // one private entry point behind the two public ones
+fn render_view_inner(
+    scene: &Scene,
+    set: &ObjectSet,
+    view: usize,
+    k: &Intrinsics,
+    randomize: Randomize,
+    depth: DepthNoise<'_>,
+    colour: Option<&NoiseConfig>,
+    target: &mut RenderTarget,
+) -> Result<FrameTruth, SamplerError> {
+    let mut items = scene.render_items(set, view)?;
     let cam = scene.views[view].camera_from_table;
-    let settings = RenderSettings {
-        lighting: scene.lighting.rotated(&cam.rotation.to_rotation_matrix()),
+    let mut settings = RenderSettings {
+        lighting: scene.lighting.transformed(&cam),
         background_rgb: [90, 90, 90],
         ..RenderSettings::default()
     };
-    if target.width() != k.width || target.height() != k.height {
-        target.resize(k.width, k.height);
+    let mut k_used = *k;
+    let mut effects = None;
+    if randomize.is_on() {
+        let mut rng = Pcg64Mcg::seed_from_u64(view_seed(scene.seed, view));
+        k_used = randomization::jitter_intrinsics(&mut rng, k, randomize);
+        effects = Some(randomization::draw_view_effects(
+            &mut rng,
+            randomize,
+            scene,
+            set,
+            &k_used,
+            &cam,
+            first_non_object(scene),
+            &mut items,
+            &mut settings,
+        ));
     }
-    render::render_scene(&items, k, &settings, target)?;
-    render::apply_noise(target, noise, noise_seed(scene.seed, view));
+    if target.width() != k_used.width || target.height() != k_used.height {
+        target.resize(k_used.width, k_used.height);
+    }
+    render::render_scene(&items, &k_used, &settings, target)?;
+    let seed = noise_seed(scene.seed, view);
+    match (depth, colour, &effects) {
+        // The original renderer: one noise call, bit for bit.
+        (DepthNoise::Basic(d), Some(c), None) if std::ptr::eq(d, c) => render::apply_noise(target, d, seed),
+        _ => {
+            match depth {
+                DepthNoise::Exact => {}
+                DepthNoise::Basic(cfg) => render::apply_noise_depth(target, cfg, seed),
+                DepthNoise::Sensor(sensor) => render::apply_depth_sensor(target, sensor, seed),
+            }
+            match (&effects, colour) {
+                (Some(e), _) => render::apply_camera_effects(target, e, seed.rotate_left(7) ^ 0xC0_1011),
+                (None, Some(c)) => render::apply_noise_colour(target, c, seed.rotate_left(7)),
+                (None, None) => {}
+            }
+        }
+    }
     let objects = scene
         .objects
         .iter()
@@ -512,7 +744,7 @@ pub fn render_view(
             bbox: c.bbox,
         })
         .collect();
-    Ok(FrameTruth { view_index: view, camera_from_table: cam, intrinsics: *k, objects })
+    Ok(FrameTruth { view_index: view, camera_from_table: cam, intrinsics: k_used, objects })
 }
 
 /// Like [`render_view`], then rewrites the label map as `kind` asks (class
@@ -527,6 +759,22 @@ pub fn render_view_labelled(
     target: &mut RenderTarget,
 ) -> Result<FrameTruth, SamplerError> {
     let truth = render_view(scene, set, view, k, noise, target)?;
+    if kind == LabelKind::Class {
+        target.map_labels_in_place(&truth.class_lut());
+    }
+    Ok(truth)
+}
+
+/// Like [`render_view_with`], then rewrites the label map as `kind` asks.
+pub fn render_view_with_labelled(
+    scene: &Scene,
+    set: &ObjectSet,
+    view: usize,
+    opts: &ViewOptions,
+    kind: LabelKind,
+    target: &mut RenderTarget,
+) -> Result<FrameTruth, SamplerError> {
+    let truth = render_view_with(scene, set, view, opts, target)?;
     if kind == LabelKind::Class {
         target.map_labels_in_place(&truth.class_lut());
     }
@@ -548,5 +796,7 @@ fn push_object_items<'a>(
     Ok(())
 }
 
+#[cfg(test)]
+mod golden;
 #[cfg(test)]
 mod tests;

@@ -5,8 +5,9 @@
 //! code under test panics or breaks an asserted invariant; this test runs every
 //! corpus file through them and, for the hand-made seeds, also checks the
 //! outcome their name promises (`valid_n<k>_*`, `refused_*`, `reject_*`,
-//! `bad_*`). Seeds are regenerated with `cargo run --bin gen_corpus` in `fuzz/`;
-//! the test below also checks that the files on disk match the generator.
+//! `bad_*`). Seeds are regenerated with `cargo run --bin gen_corpus` in `fuzz/`
+//! (or `FUSEPOSE_WRITE_SEEDS=1` on this test); the test below also checks that
+//! the files on disk match the generator.
 
 #[path = "../../fuzz/src/lib.rs"]
 mod harness;
@@ -74,6 +75,11 @@ fn frame_seed_rejections_name_their_reason() {
         ("reject_plane_misaligned", R::PlaneMisaligned),
         ("reject_plane_overlap", R::PlaneOverlap),
         ("reject_truncated", R::PayloadTruncated),
+        ("reject_instance_table_missing", R::InstanceTableMissing),
+        ("reject_instance_table_length", R::InstanceTableLength),
+        ("reject_instance_table_misaligned", R::InstanceTableMisaligned),
+        ("reject_instance_without_has_labels", R::InstanceLabelsInconsistent),
+        ("reject_instance_count_on_class_labels", R::InstanceLabelsInconsistent),
     ];
     let seeds = harness::frame_seeds();
     for (name, reason) in expect {
@@ -86,6 +92,13 @@ fn frame_seed_rejections_name_their_reason() {
         ("refused_all_zero_depth", (|e: &F| *e == F::DepthEmpty) as fn(&F) -> bool),
         ("refused_all_nan_depth", |e| matches!(e, F::DepthNonFinite { values: 48 })),
         ("refused_unknown_class", |e| *e == F::LabelOutOfRange { max: 9, num_classes: 5 }),
+        ("refused_instance_class_unknown", |e| {
+            *e == F::InstanceClassUnknown { id: 3, class: 9, num_classes: 5, u: 5, v: 3 }
+        }),
+        ("refused_instance_without_class", |e| {
+            *e == F::InstanceClassUnknown { id: 2, class: 0, num_classes: 5, u: 2, v: 1 }
+        }),
+        ("refused_instance_beyond_table", |e| *e == F::InstanceBeyondTable { id: 4, entries: 4, u: 7, v: 0 }),
     ] {
         let (_, bytes) = seeds.iter().find(|(n, _)| *n == name).unwrap();
         match harness::frame_path(bytes) {
@@ -156,11 +169,19 @@ fn seg_corpus_replays_without_panics_and_seeds_keep_their_outcome() {
     assert!(segmented >= 2, "{segmented} segmented");
 }
 
+/// With `FUSEPOSE_WRITE_SEEDS=1` the seeds are written instead (what
+/// `cargo run --bin gen_corpus` in `fuzz/` does, without building the fuzz crate).
 #[test]
 fn seed_files_match_the_generator() {
     for (target, seeds) in
         [("frame", harness::frame_seeds()), ("model", harness::model_seeds()), ("seg", harness::seg_seeds())]
     {
+        if std::env::var_os("FUSEPOSE_WRITE_SEEDS").is_some_and(|v| v == "1") {
+            let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("../fuzz/corpus").join(target);
+            for (name, bytes) in &seeds {
+                std::fs::write(dir.join(name), bytes).unwrap();
+            }
+        }
         let on_disk = corpus(target);
         for (name, bytes) in seeds {
             let file = on_disk.iter().find(|(n, _)| n == name);

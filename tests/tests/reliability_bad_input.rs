@@ -1,13 +1,14 @@
-//! Every class of bad frame from issue 8, sent to a running `fuseposed`
-//! (separate process, ICP estimator on the built-in objects): each is rejected
-//! with its own reason in the pose message and in the stats, and the next good
-//! frame is served again. The producer and consumer are this test process.
+//! Every class of bad frame from issue 8 (and the instance-label faults of
+//! issue 24), sent to a running `fuseposed` (separate process, ICP estimator
+//! on the built-in objects): each is rejected with its own reason in the pose
+//! message and in the stats, and the next good frame is served again. The
+//! producer and consumer are this test process.
 
 use std::collections::BTreeMap;
 use std::time::{Duration, Instant};
 
 use fusepose_client::{
-    ColorFormat, Consumer, DepthFormat, FrameHeader, FrameLayout, InvalidReason, Ipc, LabelFormat, PlaneRef,
+    ColorFormat, Consumer, DepthFormat, FrameHeader, FrameLayout, InvalidReason, Ipc, LabelFormat, PlaneRef, PoseFlags,
     PoseMessage, PoseStatus, Producer, camera_id, monotonic_ns,
 };
 use fusepose_tests::{TestEnv, query_stats, start_daemon};
@@ -32,6 +33,16 @@ fn u16_layout() -> FrameLayout {
     FrameLayout { depth_format: DepthFormat::U16, depth_scale: 0.001, ..f32_layout() }
 }
 
+/// f32 depth with instance labels: ids 1..=2 (table of 3 entries).
+fn instance_layout() -> FrameLayout {
+    FrameLayout { labels: Some(LabelFormat::InstanceU16 { max_instances: 2 }), ..f32_layout() }
+}
+
+/// The producer's frame size: room for every frame sent, plus spare bytes.
+fn largest_layout() -> FrameLayout {
+    FrameLayout { labels: Some(LabelFormat::InstanceU16 { max_instances: 64 }), ..f32_layout() }
+}
+
 /// A frame as header + payload bytes: a 16x12 object of class 1 at 0.8 m.
 struct RawFrame {
     header: FrameHeader,
@@ -52,6 +63,34 @@ impl RawFrame {
             }
         }
         frame
+    }
+
+    /// Two touching 8x12 instances (ids 1 and 2) of one object in the middle
+    /// of the frame at 0.8 m; `classes` is the class table sent.
+    fn instances(sequence: u64, classes: [u16; 3]) -> Self {
+        let layout = instance_layout();
+        let mut header = layout.header(camera_id("cam0"));
+        (header.fx, header.fy, header.cx, header.cy) = INTRINSICS;
+        header.sequence = sequence;
+        let mut frame = Self { header, payload: vec![0; layout.payload_len()] };
+        frame.fill_depth(|_| 0.8);
+        let ids = frame.header.labels.offset as usize;
+        for v in 18..30 {
+            for u in 24..40 {
+                let id: u16 = if u < 32 { 1 } else { 2 };
+                let at = ids + 2 * (v * W + u) as usize;
+                frame.payload[at..at + 2].copy_from_slice(&id.to_le_bytes());
+            }
+        }
+        frame.set_classes(classes);
+        frame
+    }
+
+    fn set_classes(&mut self, classes: [u16; 3]) {
+        let table = self.header.instance_classes.offset as usize;
+        for (i, c) in classes.iter().enumerate() {
+            self.payload[table + 2 * i..table + 2 * i + 2].copy_from_slice(&c.to_le_bytes());
+        }
     }
 
     /// Writes every depth value (metres) in the header's format.
@@ -121,6 +160,13 @@ impl Rig {
         edit(&mut f.header);
         f
     }
+
+    /// A good instance-label frame (two instances of class 1) with `edit` applied to its header.
+    fn edited_instances(&mut self, edit: impl FnOnce(&mut FrameHeader)) -> RawFrame {
+        let mut f = RawFrame::instances(0, [0, 1, 1]);
+        edit(&mut f.header);
+        f
+    }
 }
 
 #[test]
@@ -130,7 +176,7 @@ fn every_bad_input_class_gets_its_own_reason_and_later_frames_are_served() -> an
     let config = env.write_daemon_config("kind = \"icp\"\nmin_pixels = 20\nnum_points = 64")?;
     let _daemon = start_daemon(&env, &config)?;
     let ipc = Ipc::new(&env.ipc_options())?;
-    let producer = Producer::create(&ipc, "cam0", f32_layout())?;
+    let producer = Producer::create(&ipc, "cam0", largest_layout())?;
     let consumer = Consumer::open(&ipc, "cam0")?;
     let mut rig = Rig { producer, consumer, next_sequence: 0 };
 
@@ -142,17 +188,22 @@ fn every_bad_input_class_gets_its_own_reason_and_later_frames_are_served() -> an
     let mut cases: Vec<Case> = Vec::new();
     let full = f32_layout().payload_len();
     cases.push(("wrong wire version", InvalidReason::VersionMismatch, rig.edited(|h| h.format_version = 1)));
+    cases.push((
+        "previous wire version (no instance labels)",
+        InvalidReason::VersionMismatch,
+        rig.edited(|h| h.format_version = 2),
+    ));
     cases.push(("width 0", InvalidReason::BadSize, rig.edited(|h| h.width = 0)));
     cases.push(("height huge", InvalidReason::BadSize, rig.edited(|h| h.height = 100_000)));
     cases.push((
         "plane offset outside the payload",
         InvalidReason::PlaneOutOfBounds,
-        rig.edited(|h| h.depth.offset = full as u64 + 8),
+        rig.edited(|h| h.depth.offset = full as u32 + 8),
     ));
     cases.push((
         "plane length beyond the payload",
         InvalidReason::PlaneOutOfBounds,
-        rig.edited(|h| h.labels.len = u64::MAX),
+        rig.edited(|h| h.labels.len = u32::MAX),
     ));
     let mut truncated = rig.good(f32_layout());
     truncated.payload.truncate(full - 1000);
@@ -208,6 +259,52 @@ fn every_bad_input_class_gets_its_own_reason_and_later_frames_are_served() -> an
         rig.edited(|h| h.labels.offset = h.depth.offset),
     ));
 
+    // Instance labels (issue 24): structural faults are the decoder's, the
+    // plane's contents the daemon's content check.
+    cases.push((
+        "instance class table missing",
+        InvalidReason::InstanceTableMissing,
+        rig.edited_instances(|h| h.instance_classes = PlaneRef::default()),
+    ));
+    cases.push((
+        "instance class table shorter than instance_count + 1",
+        InvalidReason::InstanceTableLength,
+        rig.edited_instances(|h| h.instance_classes.len -= 2),
+    ));
+    cases.push((
+        "instance_count larger than the table",
+        InvalidReason::InstanceTableLength,
+        rig.edited_instances(|h| h.instance_count = 5),
+    ));
+    let mut misaligned = rig.edited_instances(|h| h.instance_classes.offset += 1);
+    misaligned.payload.extend_from_slice(&[0; 8]);
+    cases.push(("instance class table misaligned", InvalidReason::InstanceTableMisaligned, misaligned));
+    cases.push((
+        "instance labels with has_labels = 0",
+        InvalidReason::InstanceLabelsInconsistent,
+        rig.edited_instances(|h| h.has_labels = 0),
+    ));
+    cases.push((
+        "instance_count on a class-label frame",
+        InvalidReason::InstanceLabelsInconsistent,
+        rig.edited(|h| h.instance_count = 2),
+    ));
+    cases.push((
+        "instance class table on a class-label frame",
+        InvalidReason::InstanceLabelsInconsistent,
+        rig.edited(|h| h.instance_classes = PlaneRef { offset: f32_layout().payload_len() as u32, len: 4 }),
+    ));
+    let mut beyond = RawFrame::instances(0, [0, 1, 1]);
+    let at = beyond.header.labels.offset as usize + 2 * (20 * W + 30) as usize;
+    beyond.payload[at..at + 2].copy_from_slice(&3u16.to_le_bytes());
+    cases.push(("instance id beyond the class table", InvalidReason::InstanceBeyondTable, beyond));
+    cases.push(("instance with class 0", InvalidReason::InstanceClassUnknown, RawFrame::instances(0, [0, 1, 0])));
+    cases.push((
+        "instance of a class beyond the objects",
+        InvalidReason::InstanceClassUnknown,
+        RawFrame::instances(0, [0, 200, 1]),
+    ));
+
     let mut expected: BTreeMap<usize, u64> = BTreeMap::new();
     for (name, reason, frame) in cases {
         let msg = rig.send(frame)?;
@@ -230,6 +327,20 @@ fn every_bad_input_class_gets_its_own_reason_and_later_frames_are_served() -> an
     }
     let good = rig.good(f32_layout());
     assert!(rig.send(good)?.is_ok(), "a larger sequence number is served again");
+
+    // A good instance frame: two touching instances of one class, two poses,
+    // masks marked as the frame's own.
+    let msg = rig.send(RawFrame::instances(0, [0, 1, 1]))?;
+    assert!(msg.is_ok(), "instance frame: status {} reason {:?}", msg.status, msg.invalid());
+    let objects = msg.objects();
+    assert_eq!(objects.len(), 2, "{objects:?}");
+    assert_ne!(objects[0].instance_id, objects[1].instance_id);
+    for o in objects {
+        assert_eq!(o.class_id, 1);
+        assert_ne!(o.flags & PoseFlags::FROM_INSTANCE_LABELS, 0);
+        assert_eq!(o.fit_score.is_nan(), o.depth_residual_m.is_nan(), "verified: both scores, else neither");
+        assert_eq!(o.mask_pixels, 96);
+    }
 
     // Some NaN/inf among valid f32 readings are holes (protocol), not an error.
     let mut holes = rig.good(f32_layout());

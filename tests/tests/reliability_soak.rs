@@ -5,43 +5,22 @@
 //! ICP is heavy on the shared 2-core CI box (tens of ms per object, more under
 //! load), so CI runs small versions with one object per frame: 6 s at 200 fps
 //! (the daemon far slower than the camera: keep-latest is the point) and 60 s
-//! at 15 fps (no crash, no RSS growth). The long soak is the documented
-//! command in docs/RELIABILITY.md.
+//! at 15 fps (no crash, no memory growth). The network soak is
+//! `reliability_soak_net.rs`; the hour-long one is the documented command in
+//! docs/RELIABILITY.md.
+//!
+//! Memory growth is judged on the daemon's private memory (`RssAnon`) after
+//! a settle period, not on its whole RSS: the RSS also counts the pages of the
+//! producer's shared-memory frames the daemon has read, which grow in ~1.5 MB
+//! steps whenever the producer first hands over a sample slot the daemon had
+//! not read yet (bounded by the frame segment) — the cause of the flaky
+//! "RSS grew 5.44 %" failures (docs/RELIABILITY.md, "Memory in soaks").
 
-use std::collections::HashMap;
-use std::process::Command;
-
-use fusepose_tests::{daemon_binary, package_binary};
-
-/// Runs `fp-soak run <args>` and returns its `soak` line as key → value.
-fn soak(args: &[&str]) -> anyhow::Result<HashMap<String, String>> {
-    let out = Command::new(package_binary("fp-soak")?)
-        .arg("run")
-        .args(args)
-        .arg("--daemon")
-        .arg(daemon_binary()?)
-        .output()?;
-    let stdout = String::from_utf8_lossy(&out.stdout);
-    let stderr = String::from_utf8_lossy(&out.stderr);
-    anyhow::ensure!(out.status.success(), "fp-soak failed ({}):\n{stdout}\n{stderr}", out.status);
-    let line =
-        stdout.lines().find(|l| l.starts_with("soak ")).ok_or_else(|| anyhow::anyhow!("no soak line:\n{stdout}"))?;
-    println!("RESULT {line}");
-    Ok(line
-        .split_whitespace()
-        .skip(1)
-        .filter_map(|kv| kv.split_once('='))
-        .map(|(k, v)| (k.to_owned(), v.to_owned()))
-        .collect())
-}
-
-fn num(r: &HashMap<String, String>, key: &str) -> f64 {
-    r.get(key).and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("no numeric {key} in {r:?}"))
-}
+use fusepose_tests::{MAX_SETTLED_GROWTH_PCT, run_fp_soak as soak, soak_number as num};
 
 #[test]
 fn overload_at_200_fps_keeps_latency_bounded_and_counts_what_it_skips() -> anyhow::Result<()> {
-    let r = soak(&["--seconds", "6", "--fps", "200", "--objects", "1", "--warmup", "2"])?;
+    let r = soak(&["--seconds", "6", "--fps", "200", "--objects-per-frame", "1", "--warmup", "2"])?;
     assert_eq!(num(&r, "crashes"), 0.0);
     let (sent, received, processed) = (num(&r, "sent"), num(&r, "received"), num(&r, "processed"));
     let (stale, missed, invalid) = (num(&r, "skipped_stale"), num(&r, "missed_sequence"), num(&r, "invalid"));
@@ -57,16 +36,18 @@ fn overload_at_200_fps_keeps_latency_bounded_and_counts_what_it_skips() -> anyho
     // near one frame's processing time instead of growing with the run.
     assert!(num(&r, "e2e_max_ms") < 1000.0, "{r:?}");
     assert!(num(&r, "consumer_p99_us") < 1.0e6, "{r:?}");
-    assert!(num(&r, "rss_growth_pct") < 5.0, "{r:?}");
+    assert!(num(&r, "anon_growth_pct") < 5.0, "{r:?}");
     Ok(())
 }
 
 #[test]
 fn one_minute_soak_has_no_crash_and_no_memory_growth() -> anyhow::Result<()> {
-    let r = soak(&["--seconds", "60", "--fps", "15", "--objects", "1", "--warmup", "6"])?;
+    let r = soak(&["--seconds", "60", "--fps", "15", "--objects-per-frame", "1", "--warmup", "6"])?;
     assert_eq!(num(&r, "crashes"), 0.0);
     assert!(num(&r, "processed") >= 100.0, "{r:?}");
     assert_eq!(num(&r, "invalid"), 0.0);
-    assert!(num(&r, "rss_growth_pct") < 5.0, "daemon RSS grew: {r:?}");
+    // Private memory after the first 20 s: flat to the KiB over 300 s in
+    // measurement (steps ≤ 32 KiB after settling, < 0.3 % here); 1 % is a real leak.
+    assert!(num(&r, "anon_growth_pct") < MAX_SETTLED_GROWTH_PCT, "daemon private memory grew: {r:?}");
     Ok(())
 }

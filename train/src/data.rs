@@ -3,9 +3,12 @@
 //! network inputs by `estimator::Workspace::prepare` — exactly the inference
 //! path. A background thread fills a bounded crossbeam channel.
 //!
-//! One rendered frame gives one sample per instance found in its class label
-//! map, matched to the ground truth by class id (the sampler draws each class at
-//! most once per scene). Augmentation (training only): per-channel colour gain
+//! One rendered frame gives one sample per instance the workspace finds in its
+//! label plane, matched to the ground-truth instance that covers most of its
+//! pixels (rendered frames carry instance labels, so several copies of one
+//! class are told apart); an instance of which no single object covers
+//! [`MIN_OWN_SHARE`] — two touching copies merged into one region, or a
+//! segmenter region straying onto another object — is not a sample. Augmentation (training only): per-channel colour gain
 //! and bias on the normalised crop, 1 mm Gaussian point jitter, and a uniform
 //! ±2 cm shift of the whole cloud applied to the ground truth as well.
 //! Occluders come from the cluttered scenes; depth noise from the renderer.
@@ -39,6 +42,10 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
+/// Share of an instance's pixels one ground-truth object must cover for the
+/// instance to be trained on as a view of that object.
+pub const MIN_OWN_SHARE: f64 = 0.8;
+
 /// One object instance, as the network sees it, with its ground truth.
 #[derive(Clone, Debug)]
 pub struct Sample {
@@ -64,6 +71,8 @@ pub struct DataConfig {
     /// Instances less visible than this are skipped.
     pub min_visible: f64,
     pub augment: bool,
+    /// How rendered scenes are drawn (randomisation, depth sensor, copies per class).
+    pub sampler: SamplerConfig,
 }
 
 /// Tiny Gaussian helper (Box–Muller), so no extra dependency is needed.
@@ -127,6 +136,8 @@ impl SegMasks {
 /// Ground truth of one object in a frame, for matching instances.
 struct Truth {
     class_id: u16,
+    /// Label of the object in the frame's instance label map (0 = unknown: match by box centre).
+    instance_label: u16,
     pose: Pose,
     visible: f64,
     /// Centre of the visible box (pixels), if any.
@@ -144,15 +155,17 @@ pub fn frame_samples(
     target: &mut RenderTarget,
     seg: Option<&mut SegMasks>,
 ) -> anyhow::Result<Vec<Sample>> {
-    let sampler = SamplerConfig::default();
+    let sampler = &cfg.sampler;
     let k = Intrinsics::YCB_VIDEO;
-    let scene = match sample_scene(set, &sampler, seed) {
+    let scene = match sample_scene(set, sampler, seed) {
         Ok(s) => s,
         Err(fusepose_scene::sampler::SamplerError::Placement { .. }) => return Ok(Vec::new()),
         Err(e) => return Err(e).context("sampling a scene"),
     };
-    let truth = render_view_labelled(&scene, set, 0, &k, &NoiseConfig::default(), LabelKind::Class, target)
+    let truth = render_view_labelled(&scene, set, 0, &k, &NoiseConfig::default(), LabelKind::Instance, target)
         .context("rendering a scene")?;
+    let k = truth.intrinsics;
+    let mut class_plane = Vec::new();
     let mut frame = FrameView {
         intrinsics: k,
         color_format: ColorFormat::Rgb8,
@@ -169,20 +182,24 @@ pub fn frame_samples(
             s.engine.segment(&frame, &mut s.labels).context("segmenting a training frame")?;
             frame.labels = Some(LabelPlane::U16(&s.labels));
         }
-        None => frame.labels = Some(LabelPlane::U16(target.labels())),
+        None => {
+            target.map_labels(&truth.class_lut(), &mut class_plane);
+            frame.labels = Some(LabelPlane::U16(&class_plane));
+        }
     }
     let truths: Vec<Truth> = truth
         .objects
         .iter()
         .map(|o| Truth {
             class_id: o.class_id,
+            instance_label: o.instance_label,
             pose: o.pose,
             visible: o.visible_fraction,
             centre: o.bbox.map(|b| ((b.u_min + b.u_max) as f64 / 2.0, (b.v_min + b.v_max) as f64 / 2.0)),
             max_offset: from_segmenter.then(|| set.by_class(o.class_id).map(|m| m.diameter)).flatten(),
         })
         .collect();
-    samples_from_frame(&frame, &truths, cfg, seed, ws)
+    samples_from_frame(&frame, &truths, Some(target.labels()), cfg, seed, ws)
 }
 
 /// Loads BOP frame `index` and returns its samples.
@@ -205,6 +222,7 @@ pub fn bop_frame_samples(
         f.gt.iter()
             .map(|g| Truth {
                 class_id: g.obj_id,
+                instance_label: 0,
                 pose: g.pose,
                 visible: g.visib_fract,
                 centre: (g.bbox_visib[2] > 0).then(|| {
@@ -216,12 +234,43 @@ pub fn bop_frame_samples(
                 max_offset: None,
             })
             .collect();
-    samples_from_frame(&frame, &truths, cfg, seed, ws)
+    samples_from_frame(&frame, &truths, None, cfg, seed, ws)
+}
+
+/// The ground-truth object that covers at least [`MIN_OWN_SHARE`] of
+/// instance `i`'s pixels in `instance_labels` (the frame's true instance map).
+fn owner<'t>(ws: &Workspace, i: usize, w: usize, instance_labels: &[u16], truths: &'t [Truth]) -> Option<&'t Truth> {
+    let inst = ws.instances[i];
+    let id = ws.component_id(i)?;
+    let ids = ws.component_ids();
+    let [u0, v0, u1, v1] = inst.bbox.map(|x| x as usize);
+    let mut counts: Vec<(u16, u32)> = Vec::with_capacity(4);
+    let mut total = 0u32;
+    for v in v0..=v1 {
+        for u in u0..=u1 {
+            let p = v * w + u;
+            if ids.get(p) != Some(&id) {
+                continue;
+            }
+            total += 1;
+            let l = instance_labels.get(p).copied().unwrap_or(0);
+            match counts.iter_mut().find(|(k, _)| *k == l) {
+                Some((_, c)) => *c += 1,
+                None => counts.push((l, 1)),
+            }
+        }
+    }
+    let (label, n) = counts.into_iter().filter(|&(l, _)| l != 0).max_by_key(|&(_, c)| c)?;
+    if (n as f64) < MIN_OWN_SHARE * total.max(1) as f64 {
+        return None;
+    }
+    truths.iter().find(|t| t.instance_label == label && t.class_id == inst.class_id)
 }
 
 fn samples_from_frame(
     frame: &FrameView<'_>,
     truths: &[Truth],
+    instance_labels: Option<&[u16]>,
     cfg: &DataConfig,
     seed: u64,
     ws: &mut Workspace,
@@ -235,8 +284,11 @@ fn samples_from_frame(
         let (cu, cv) =
             ((inst.bbox[0] as f64 + inst.bbox[2] as f64) / 2.0, (inst.bbox[1] as f64 + inst.bbox[3] as f64) / 2.0);
         let dist = |t: &Truth| t.centre.map_or(f64::INFINITY, |(u, v)| (u - cu).powi(2) + (v - cv).powi(2));
-        let Some(t) = truths.iter().filter(|t| t.class_id == inst.class_id).min_by(|a, b| dist(a).total_cmp(&dist(b)))
-        else {
+        let matched = match instance_labels {
+            Some(labels) => owner(ws, i, frame.width(), labels, truths),
+            None => truths.iter().filter(|t| t.class_id == inst.class_id).min_by(|a, b| dist(a).total_cmp(&dist(b))),
+        };
+        let Some(t) = matched else {
             continue;
         };
         if t.visible < cfg.min_visible || inst.distinct_points(n) < cfg.min_points {

@@ -81,6 +81,9 @@ pub struct TrainOptions {
     /// Objects less visible than this (share of their silhouette, 0..1) are
     /// not trained on.
     pub min_visible: f64,
+    /// How rendered training scenes are drawn (randomisation, depth sensor,
+    /// copies per class); validation always uses the plain default scenes.
+    pub sampler: fusepose_scene::sampler::SamplerConfig,
 }
 
 /// What a finished run reports.
@@ -189,6 +192,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         min_points: 32,
         min_visible: opts.min_visible,
         augment: true,
+        sampler: opts.sampler.clone(),
     };
     // Training scenes: a per-seed, per-resume range far from the validation seeds.
     let first_seed = (opts.seed % 1000) * 1_000_000_000 + start_steps * 7 + 1;

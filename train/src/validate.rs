@@ -32,7 +32,14 @@ pub fn validation_set(
     frames: usize,
     max_samples: usize,
 ) -> anyhow::Result<Vec<Sample>> {
-    let cfg = DataConfig { num_points, crop_size, min_points: 32, min_visible: 0.2, augment: false };
+    let cfg = DataConfig {
+        num_points,
+        crop_size,
+        min_points: 32,
+        min_visible: 0.2,
+        augment: false,
+        sampler: Default::default(),
+    };
     let mut ws = workspace(set, &cfg)?;
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
     let mut out = Vec::new();

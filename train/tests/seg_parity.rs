@@ -99,6 +99,38 @@ fn engine_logits_match_burn_forward() {
 }
 
 #[test]
+fn engine_offsets_match_burn_forward_and_old_files_have_none() {
+    let set = three_objects();
+    let dir = Scratch::new("offsets");
+    let cfg = SegConfig::new(3);
+    assert!(cfg.offsets);
+    let path = dir.path().join("seg.safetensors");
+    let net = save_random(&cfg, &set, &path);
+    let mut engine = SegEngine::load(&path, &set).unwrap();
+    assert!(engine.separates_instances());
+    let input = random_input(&cfg, 5);
+    engine.forward(&input).unwrap();
+    let x = Tensor::<4>::from_data(TensorData::new(input, [1, 4, cfg.input_height, cfg.input_width]), &Device::flex());
+    let (_, offsets) = net.forward_all(x);
+    let expect = offsets.expect("offset head").into_data().try_to_vec::<f32>().unwrap();
+    assert_close(engine.offsets(), &expect);
+    // A file written without the head (as before it existed) loads without offsets.
+    let old = SegConfig { offsets: false, ..SegConfig::new(3) };
+    let old_path = dir.path().join("old.safetensors");
+    save_random(&old, &set, &old_path);
+    let engine = SegEngine::load(&old_path, &set).unwrap();
+    assert!(!engine.separates_instances() && engine.offsets().is_empty());
+    // Resuming it for training adds a head the engine then reads.
+    let loaded = store::load(&old_path, &Device::flex()).unwrap();
+    assert!(loaded.net.offset.is_none());
+    let with = loaded.net.with_offset_head(&cfg, &Device::flex());
+    let new_path = dir.path().join("new.safetensors");
+    store::save(&with, &cfg, &object_entries(&set), &TrainRecord::default(), &serde_json::json!({}), &new_path)
+        .unwrap();
+    assert!(SegEngine::load(&new_path, &set).unwrap().separates_instances());
+}
+
+#[test]
 fn segment_labels_are_argmax_of_burn_logits() {
     let set = three_objects();
     let cfg = SegConfig::new(3);

@@ -42,6 +42,7 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
         progress: false,
         seg_masks: 0.5,
         min_visible: 0.1,
+        sampler: Default::default(),
     };
     let summary = train(Arc::new(builtin_objects()), &opts).unwrap();
     assert_eq!(summary.record.steps, start + 2);

@@ -26,6 +26,7 @@ fn samples(set: &ObjectSet, cfg: &NetConfig, want: usize) -> Vec<Sample> {
         min_points: 32,
         min_visible: 0.2,
         augment: true,
+        sampler: Default::default(),
     };
     let mut ws = workspace(set, &dc).unwrap();
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);

@@ -28,8 +28,8 @@ pub struct E2eArgs {
     #[arg(long, value_delimiter = ',', default_value = "24,30,60")]
     pub fps: Vec<f64>,
     /// Objects per frame.
-    #[arg(long, default_value_t = 5)]
-    pub objects: usize,
+    #[arg(long, alias = "objects", default_value_t = 5)]
+    pub objects_per_frame: usize,
     /// Measured seconds per frame rate (after 1 s of warm-up).
     #[arg(long, default_value_t = 20.0)]
     pub seconds: f64,
@@ -39,9 +39,10 @@ pub struct E2eArgs {
     /// Network weights.
     #[arg(long, default_value = "models/builtin.safetensors")]
     pub weights: PathBuf,
-    /// Network threads per frame (1 or 2).
-    #[arg(long, default_value_t = 2)]
-    pub threads: usize,
+    /// Network threads per frame, 1 or 2 (the daemon's `estimator.worker_threads`)
+    /// [default: the daemon's own: the machine's CPUs, at most 2].
+    #[arg(long)]
+    pub threads: Option<usize>,
     /// Refiner iterations at most per object.
     #[arg(long, default_value_t = 2)]
     pub refine_iterations: usize,
@@ -78,11 +79,11 @@ impl Default for E2eArgs {
     fn default() -> Self {
         Self {
             fps: vec![24.0, 30.0, 60.0],
-            objects: 5,
+            objects_per_frame: 5,
             seconds: 20.0,
             deadline_ms: None,
             weights: "models/builtin.safetensors".into(),
-            threads: 2,
+            threads: None,
             refine_iterations: 2,
             no_degrade: false,
             tracking: false,
@@ -141,10 +142,10 @@ pub struct E2eReport {
 fn daemon_config(args: &E2eArgs, ns: &IpcNamespace, deadline_ms: f64, hlog: &std::path::Path) -> String {
     let pins = if args.pin { "[0, 1]" } else { "[]" };
     format!(
-        "cameras = [\"{CAMERA}\"]\nlog_level = \"info\"\ndeadline_ms = {deadline_ms}\n\n[estimator]\nkind = \"net\"\nweights = {:?}\nmax_instances = 8\nrefine_iterations = {}\nworker_threads = {}\ndeadline_aware = {}\npin_cpus = {pins}\n{}\n\n[estimator.tracking]\nenabled = {}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 0.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\nreceive_spin_us = {}\n",
+        "cameras = [\"{CAMERA}\"]\nlog_level = \"info\"\ndeadline_ms = {deadline_ms}\n\n[estimator]\nkind = \"net\"\nweights = {:?}\nmax_instances = 8\nrefine_iterations = {}\n{}deadline_aware = {}\npin_cpus = {pins}\n{}\n\n[estimator.tracking]\nenabled = {}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 0.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\nreceive_spin_us = {}\n",
         args.weights.display().to_string(),
         args.refine_iterations,
-        args.threads.clamp(1, 2),
+        args.threads.map_or(String::new(), |t| format!("worker_threads = {}\n", t.clamp(1, 2))),
         !args.no_degrade,
         args.estimator_extra,
         args.tracking,
@@ -201,7 +202,7 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
             "e2e-producer".into(),
             fps.to_string(),
             frames.to_string(),
-            args.objects.to_string(),
+            args.objects_per_frame.to_string(),
             args.seed.to_string(),
             video_frames.to_string(),
         ],
@@ -255,7 +256,7 @@ pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
         rates.push(run_rate(args, fps)?);
     }
     let series: Vec<(String, Percentiles)> =
-        rates.iter().map(|r| (format!("{} FPS, {} objects", r.fps, args.objects), r.latency)).collect();
+        rates.iter().map(|r| (format!("{} FPS, {} objects", r.fps, args.objects_per_frame), r.latency)).collect();
     let png = args.out.join("e2e.png");
     let png = latency::plot_percentiles(
         &png,
@@ -281,7 +282,12 @@ pub fn render(r: &E2eReport) -> String {
     let a = &r.args;
     let mut s = format!(
         "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + producer ({} objects, rendered video) + consumer\n",
-        a.threads, a.refine_iterations, !a.no_degrade, a.tracking, a.pin, a.objects
+        a.threads.map_or_else(|| "machine's".to_owned(), |t| t.clamp(1, 2).to_string()),
+        a.refine_iterations,
+        !a.no_degrade,
+        a.tracking,
+        a.pin,
+        a.objects_per_frame
     );
     if let Some(e) = r.rates.first().map(|r| &r.estimator).filter(|e| !e.is_empty()) {
         s.push_str(&format!("estimator: {e}\n"));

@@ -47,8 +47,8 @@ pub fn main(args: &[String]) -> anyhow::Result<()> {
             let strategy = strategy(&args[1])?;
             let ipc = Ipc::new(&IpcOptions::from_env())?;
             let services = CameraServices::open(&ipc, "bench")?;
-            let subscriber = services.frames.subscriber_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
-            let listener = services.frame_events.listener_builder().create().map_err(|e| anyhow::anyhow!("{e:?}"))?;
+            let subscriber = services.frame_subscriber()?;
+            let listener = services.frame_listener()?;
             println!("ready");
             std::io::stdout().flush()?;
             let mut predictor = ArrivalPredictor::default();

@@ -5,7 +5,7 @@
 //! `objects[i]`): BOP `obj_id` is taken as the class id (our datasets write it
 //! so); YCB-Video class names (`classes.txt`) are matched to object names.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 use anyhow::{Context, bail};
 use fusepose_scene::bop::{BopDataset, ObjectSource};
@@ -35,6 +35,11 @@ pub struct EvalFrame {
     pub depth_unit_m: f64,
     /// Ground-truth class-id plane (0 = background or an object not in the set).
     pub labels: Vec<u16>,
+    /// Ground-truth instance ids per pixel (`k + 1` for `gt[k]`, 0 = none;
+    /// all 0 where the dataset has no instance masks, e.g. YCB-Video).
+    pub instances: Vec<u16>,
+    /// Instance id → class id for [`EvalFrame::instances`] (index 0 = background).
+    pub instance_classes: Vec<u16>,
     /// Ground-truth objects of the set (objects outside it are left out).
     pub gt: Vec<GtObject>,
 }
@@ -53,7 +58,7 @@ impl EvalDataset {
             let data = YcbVideo::open(path).with_context(|| format!("opening YCB-Video at {}", path.display()))?;
             return Ok(EvalDataset::Ycb { data, to_set: Vec::new() });
         }
-        let split_dir: PathBuf = if path.join(split).is_dir() { path.join(split) } else { path.to_path_buf() };
+        let split_dir = crate::dataset_path::resolve_bop_split(path, split)?;
         let bop = BopDataset::open(&split_dir).with_context(|| format!("opening BOP split {}", split_dir.display()))?;
         Ok(EvalDataset::Bop(bop))
     }
@@ -121,6 +126,8 @@ impl EvalDataset {
                     depth: f.depth,
                     depth_unit_m: f.depth_unit_m,
                     labels: f.labels.into_iter().map(known).collect(),
+                    instance_classes: std::iter::once(0).chain(f.gt.iter().map(|g| known(g.obj_id))).collect(),
+                    instances: f.instances,
                     gt: f
                         .gt
                         .iter()
@@ -140,6 +147,8 @@ impl EvalDataset {
                     rgb: f.rgb,
                     depth: f.depth,
                     depth_unit_m: f.depth_unit_m,
+                    instances: vec![0; f.labels.len()],
+                    instance_classes: vec![0],
                     labels: f.labels.into_iter().map(map).collect(),
                     gt: f
                         .gt

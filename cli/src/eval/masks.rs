@@ -16,8 +16,13 @@ use super::dataset::EvalFrame;
 /// The segmenter with its label buffer and accumulated scores.
 pub struct NetMasks {
     engine: SegEngine,
+    /// The segmenter's plane of the last frame: instance ids when it separates
+    /// instances (classes in `classes`), else class ids.
+    labels: Vec<u16>,
+    /// Instance id → class id of the last frame (empty for a class plane).
+    classes: Vec<u16>,
     /// Class ids of the last segmented frame.
-    pub labels: Vec<u16>,
+    pub class_labels: Vec<u16>,
     /// Milliseconds per frame.
     pub ms: Vec<f64>,
     confusion: Confusion,
@@ -52,6 +57,8 @@ impl NetMasks {
         Ok(Self {
             engine,
             labels: Vec::new(),
+            classes: Vec::new(),
+            class_labels: Vec::new(),
             ms: Vec::new(),
             confusion: Confusion::new(objects.len() + 1),
             names: objects.objects.iter().map(|o| o.name.clone()).collect(),
@@ -67,12 +74,31 @@ impl NetMasks {
             depth: DepthPlane::U16 { data: &frame.depth, scale: frame.depth_unit_m as f32 },
             labels: None,
         };
-        self.labels.resize(frame.labels.len(), 0);
         let start = Instant::now();
-        self.engine.segment(&view, &mut self.labels)?;
+        let plane = self.engine.segment_plane(&view, &mut self.labels)?;
         self.ms.push(start.elapsed().as_secs_f64() * 1e3);
-        self.confusion.add(&self.labels, &frame.labels);
+        self.classes.clear();
+        if let fusepose_estimator::LabelPlane::Instances { classes, .. } = plane {
+            self.classes.extend_from_slice(classes);
+        }
+        let (labels, classes) = (&self.labels, &self.classes);
+        self.class_labels.clear();
+        if classes.is_empty() {
+            self.class_labels.extend_from_slice(labels);
+        } else {
+            self.class_labels.extend(labels.iter().map(|&id| classes.get(id as usize).copied().unwrap_or(0)));
+        }
+        self.confusion.add(&self.class_labels, &frame.labels);
         Ok(())
+    }
+
+    /// The label plane of the last segmented frame, as the estimator takes it.
+    pub fn plane(&self) -> fusepose_estimator::LabelPlane<'_> {
+        if self.classes.is_empty() {
+            fusepose_estimator::LabelPlane::U16(&self.labels)
+        } else {
+            fusepose_estimator::LabelPlane::Instances { ids: &self.labels, classes: &self.classes }
+        }
     }
 
     /// Prints mIoU, per-class IoU and the time per frame.

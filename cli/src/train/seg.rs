@@ -101,6 +101,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         val_frames: args.val_frames,
         log: args.log.clone(),
         progress: !args.quiet,
+        sampler: super::training_sampler(args),
         ..SegTrainConfig::default()
     };
     let report = train_segmenter(cfg)?;

@@ -82,6 +82,11 @@ impl OverlayWriter {
                 Some(&self.labels[..])
             }
             (Some(LabelData::U16(l)), _) => Some(l),
+            (Some(LabelData::Instances { ids, classes }), _) => {
+                let class = |id: u16| classes.get(id as usize).copied().unwrap_or(0);
+                self.labels.iter_mut().zip(ids).for_each(|(d, &id)| *d = class(id));
+                Some(&self.labels[..])
+            }
             (None, Some(seg)) => {
                 let view = FrameView {
                     intrinsics: k,

@@ -51,10 +51,15 @@ static void print_message(const fp_pose_message *m) {
     }
     for (unsigned i = 0; i < m->object_count; ++i) {
         const fp_object_pose *o = &m->objects[i];
-        printf("  class %u instance %u xyz_mm %.1f %.1f %.1f q_xyzw %.4f %.4f %.4f %.4f conf %.2f\n",
+        printf("  class %u instance %u xyz_mm %.1f %.1f %.1f q_xyzw %.4f %.4f %.4f %.4f conf %.2f flags 0x%x",
                (unsigned)o->class_id, (unsigned)o->instance_id, o->translation_m[0] * 1e3, o->translation_m[1] * 1e3,
                o->translation_m[2] * 1e3, o->quaternion[0], o->quaternion[1], o->quaternion[2], o->quaternion[3],
-               (double)o->confidence);
+               (double)o->confidence, (unsigned)o->flags);
+        /* fit_score and depth_residual_m are NaN unless the pose was verified. */
+        if (o->flags & FUSEPOSE_POSE_VERIFIED) {
+            printf(" fit %.2f residual_mm %.1f", (double)o->fit_score, (double)o->depth_residual_m * 1e3);
+        }
+        printf("\n");
     }
 }
 

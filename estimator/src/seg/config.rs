@@ -6,11 +6,19 @@
 //! at the resolution of `e3, e2, e1`, each over `cat(nearest_up(previous), skip)`
 //! (upsampled channels first); `head` 1x1 `dec[2] → num_classes + 1` logits at
 //! half the input resolution. Output channel 0 is background, channel `c` class id `c`.
+//! With [`SegConfig::offsets`], a second 1x1 head `offset` (`dec[2] → 2`) predicts
+//! each cell's offset to the centre of its object instance (x then y, in units
+//! of [`OFFSET_UNIT_CELLS`] output cells), which separates touching objects of
+//! one class (centre-offset voting, as in Panoptic-DeepLab and PVN3D).
 
 use serde::{Deserialize, Serialize};
 
 /// Input channels: normalised R, G, B and depth in metres (0 = missing).
 pub const INPUT_CHANNELS: usize = 4;
+
+/// Output cells per unit of the offset head: an output of 1.0 means 10 cells
+/// (80 pixels of a 640x480 frame), which keeps the regression targets near ±1.
+pub const OFFSET_UNIT_CELLS: f32 = 10.0;
 
 /// Hyper-parameters fixing the tensor layout of a segmenter file.
 #[derive(Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
@@ -24,6 +32,10 @@ pub struct SegConfig {
     pub enc: [usize; 4],
     /// Decoder widths `d3, d2, d1`.
     pub dec: [usize; 3],
+    /// Whether the file has the instance centre-offset head (files written
+    /// before it existed read as `false`).
+    #[serde(default)]
+    pub offsets: bool,
 }
 
 /// Size of a 3x3, padding-1 convolution's output along one axis.
@@ -36,7 +48,14 @@ impl SegConfig {
     /// The default architecture for `num_classes` objects: 160x120 input,
     /// encoder 16-32-64-64, decoder 32-16-16.
     pub fn new(num_classes: usize) -> Self {
-        Self { num_classes, input_width: 160, input_height: 120, enc: [16, 32, 64, 64], dec: [32, 16, 16] }
+        Self {
+            num_classes,
+            input_width: 160,
+            input_height: 120,
+            enc: [16, 32, 64, 64],
+            dec: [32, 16, 16],
+            offsets: true,
+        }
     }
 
     /// Output channels (objects + background).
@@ -80,7 +99,7 @@ impl SegConfig {
     pub fn layers(&self) -> Vec<(&'static str, usize, usize, usize, usize)> {
         let [c1, c2, c3, c4] = self.enc;
         let [d3, d2, d1] = self.dec;
-        vec![
+        let mut layers = vec![
             ("e1", INPUT_CHANNELS, c1, 3, 2),
             ("e2", c1, c2, 3, 2),
             ("e3", c2, c3, 3, 2),
@@ -89,7 +108,11 @@ impl SegConfig {
             ("d2", d3 + c2, d2, 3, 1),
             ("d1", d2 + c1, d1, 3, 1),
             ("head", d1, self.outputs(), 1, 1),
-        ]
+        ];
+        if self.offsets {
+            layers.push(("offset", d1, 2, 1, 1));
+        }
+        layers
     }
 
     /// Every tensor of a file with its shape (PyTorch layout `[O, I, kH, kW]`, bias `[O]`).
@@ -112,7 +135,7 @@ impl SegConfig {
         let s = self.sizes();
         let at = |level: usize| s[level].0 * s[level].1;
         // Output resolution of each layer in `layers()` order.
-        let levels = [1, 2, 3, 4, 3, 2, 1, 1];
+        let levels = [1, 2, 3, 4, 3, 2, 1, 1, 1];
         self.layers().into_iter().zip(levels).map(|((_, i, o, k, _), l)| at(l) * o * i * k * k).sum()
     }
 }
@@ -123,7 +146,7 @@ mod tests {
 
     #[test]
     fn default_sizes_and_cost() {
-        let c = SegConfig::new(8);
+        let c = SegConfig { offsets: false, ..SegConfig::new(8) };
         assert_eq!(c.sizes(), [(120, 160), (60, 80), (30, 40), (15, 20), (8, 10)]);
         assert_eq!(c.output_size(), (60, 80));
         assert_eq!(c.tensor_shapes().len(), 16);
@@ -140,6 +163,18 @@ mod tests {
             + 4800 * 9 * 16;
         assert_eq!(c.macs(), expect);
         assert!(c.validate().is_ok());
+        let with = SegConfig::new(8);
+        assert_eq!(with.tensor_shapes().len(), 18);
+        assert_eq!(with.tensor_shapes()[16], ("offset.weight".to_string(), vec![2, 16, 1, 1]));
+        assert_eq!(with.macs(), expect + 4800 * 2 * 16);
+    }
+
+    #[test]
+    fn files_without_the_offset_flag_read_as_without_offsets() {
+        let json = r#"{"num_classes":8,"input_width":160,"input_height":120,"enc":[16,32,64,64],"dec":[32,16,16]}"#;
+        let c: SegConfig = serde_json::from_str(json).unwrap();
+        assert!(!c.offsets);
+        assert_eq!(c.layers().len(), 8);
     }
 
     #[test]

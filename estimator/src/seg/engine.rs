@@ -16,7 +16,8 @@ use super::boundary::{Boundary, BoundaryScratch, refine};
 use super::config::{INPUT_CHANNELS, SegConfig};
 use super::file::SegFile;
 use super::input::FrameMap;
-use crate::frame::{FrameError, FrameView};
+use super::voting::{Voting, VotingParams};
+use crate::frame::{FrameError, FrameView, LabelPlane};
 use crate::net::NetLoadError;
 use crate::net::gemm::{cols_len, conv3x3, gemm_acc};
 use crate::net::meta::ObjectEntry;
@@ -177,7 +178,7 @@ fn erode_boundaries(cells: &[u16], w: usize, out: &mut [u16]) {
 pub struct SegEngine {
     config: SegConfig,
     objects: Vec<ObjectEntry>,
-    /// e1, e2, e3, e4, d3, d2, d1, head.
+    /// e1, e2, e3, e4, d3, d2, d1, head, then `offset` when the file has it.
     layers: Vec<Layer>,
     /// `[4, H0*W0]`.
     input: Vec<f32>,
@@ -193,6 +194,13 @@ pub struct SegEngine {
     d1: Vec<f32>,
     /// `[K+1, H1*W1]`.
     logits: Vec<f32>,
+    /// `[2, H1*W1]`: centre offsets (x, y) when the file has the offset head, else empty.
+    offsets: Vec<f32>,
+    /// Instance id per cell of the last [`SegEngine::segment_instances`].
+    cell_ids: Vec<u16>,
+    /// Instance id → class id of the last [`SegEngine::segment_instances`] (index 0 = background).
+    instance_classes: Vec<u16>,
+    voting: Voting,
     cols: Vec<f32>,
     cells: Vec<u16>,
     min_component_cells: usize,
@@ -257,6 +265,10 @@ impl SegEngine {
             d2: vec![0.0; d2 * hw(2)],
             d1: vec![0.0; d1 * hw(1)],
             logits: vec![0.0; c.outputs() * hw(1)],
+            offsets: if c.offsets { vec![0.0; 2 * hw(1)] } else { Vec::new() },
+            cell_ids: vec![0; hw(1)],
+            instance_classes: Vec::with_capacity(hw(1) + 1),
+            voting: Voting::new(s[1].1, s[1].0, VotingParams::default()),
             cols: vec![0.0; cols],
             cells: vec![0; hw(1)],
             min_component_cells: MIN_COMPONENT_CELLS,
@@ -288,6 +300,28 @@ impl SegEngine {
     /// Logits of the last forward pass, `[K+1, out_h * out_w]` (channel 0 = background).
     pub fn logits(&self) -> &[f32] {
         &self.logits
+    }
+
+    /// Centre offsets of the last forward pass, `[2, out_h * out_w]` (x then y,
+    /// in units of [`super::config::OFFSET_UNIT_CELLS`] cells); empty without the offset head.
+    pub fn offsets(&self) -> &[f32] {
+        &self.offsets
+    }
+
+    /// Whether the file has the centre-offset head, i.e. [`SegEngine::segment_instances`]
+    /// separates touching objects of one class.
+    pub fn separates_instances(&self) -> bool {
+        self.config.offsets
+    }
+
+    /// Peak-search tuning of the instance voting.
+    pub fn set_voting(&mut self, params: VotingParams) {
+        self.voting.set_params(params);
+    }
+
+    /// Instance id per output cell of the last [`SegEngine::segment_instances`].
+    pub fn cell_instances(&self) -> &[u16] {
+        &self.cell_ids
     }
 
     /// Class id per output cell of the last [`SegEngine::segment`], `[out_h * out_w]`
@@ -369,6 +403,79 @@ impl SegEngine {
         Ok(())
     }
 
+    /// Segments `frame` into object instances: `ids_out` (`width * height`)
+    /// receives an instance id per pixel (0 = background) and the returned
+    /// table gives each id's class (`table[id]`, `table[0] = 0`). With the
+    /// offset head, touching objects of one class are separated by their
+    /// centre votes ([`super::voting`]); without it every class is one id
+    /// (id = class id), which the estimator splits into connected regions as
+    /// it does a class plane. Pixel borders are those of [`SegEngine::segment`].
+    pub fn segment_instances(&mut self, frame: &FrameView<'_>, ids_out: &mut [u16]) -> Result<&[u16], SegError> {
+        self.segment(frame, ids_out)?;
+        self.instance_classes.clear();
+        if !self.config.offsets {
+            self.instance_classes.extend(0..=self.config.num_classes as u16);
+            return Ok(&self.instance_classes);
+        }
+        let count = self.voting.assign(&self.cells, &self.offsets, &mut self.cell_ids);
+        self.instance_classes.push(0);
+        self.instance_classes.extend(self.voting.centres().iter().take(count).map(|c| c.class_id));
+        let Some(map) = self.map.as_ref() else { return Ok(&self.instance_classes) };
+        let (out_w, out_h) = map.grid_size();
+        let (w, _) = map.frame_size();
+        // Each pixel takes the instance of its cell when the classes agree,
+        // else of the nearest same-class cell among the 3x3 around it (pixel
+        // borders may give a pixel a neighbour cell's class), else background.
+        for (p, label) in ids_out.iter_mut().enumerate() {
+            let class = *label;
+            if class == 0 {
+                continue;
+            }
+            let (cx, cy) = map.cell_of(p % w, p / w);
+            let own = cy * out_w + cx;
+            *label = if self.cells[own] == class {
+                self.cell_ids[own]
+            } else {
+                let mut id = 0;
+                'search: for y in cy.saturating_sub(1)..=(cy + 1).min(out_h - 1) {
+                    for x in cx.saturating_sub(1)..=(cx + 1).min(out_w - 1) {
+                        if self.cells[y * out_w + x] == class {
+                            id = self.cell_ids[y * out_w + x];
+                            break 'search;
+                        }
+                    }
+                }
+                id
+            };
+        }
+        Ok(&self.instance_classes)
+    }
+
+    /// Segments `frame` into the label plane the estimator consumes: an
+    /// instance plane ([`LabelPlane::Instances`], ids in `buf`, classes in the
+    /// engine) when the file has the offset head, else a class plane in `buf`.
+    /// `buf` is resized to the frame (allocating only when the size grows).
+    pub fn segment_plane<'a>(
+        &'a mut self,
+        frame: &FrameView<'_>,
+        buf: &'a mut Vec<u16>,
+    ) -> Result<LabelPlane<'a>, SegError> {
+        frame.validate()?;
+        buf.resize(frame.width() * frame.height(), 0);
+        if self.config.offsets {
+            let classes = self.segment_instances(frame, buf)?;
+            Ok(LabelPlane::Instances { ids: buf, classes })
+        } else {
+            self.segment(frame, buf)?;
+            Ok(LabelPlane::U16(buf))
+        }
+    }
+
+    /// Instance id → class id table of the last [`SegEngine::segment_instances`] (index 0 = background).
+    pub fn instance_classes(&self) -> &[u16] {
+        &self.instance_classes
+    }
+
     /// Runs the network on a prepared input `[4, H0, W0]` and returns the logits `[K+1, H1*W1]`.
     pub fn forward(&mut self, input: &[f32]) -> Result<&[f32], SegError> {
         if input.len() != self.input.len() {
@@ -436,6 +543,13 @@ impl SegEngine {
         let x = ArrayView2::from_shape((d1c, hw(1)), &self.d1[..]).expect("d1 buffer");
         let mut out = ArrayViewMut2::from_shape((k, hw(1)), &mut self.logits[..]).expect("logits buffer");
         gemm_acc(head.w.view(), x, &mut out);
+        if let Some(offset) = l.get(8) {
+            for (row, &b) in self.offsets.chunks_exact_mut(hw(1)).zip(offset.b.iter()) {
+                row.fill(b);
+            }
+            let mut out = ArrayViewMut2::from_shape((2, hw(1)), &mut self.offsets[..]).expect("offset buffer");
+            gemm_acc(offset.w.view(), x, &mut out);
+        }
     }
 
     /// Per-cell argmax of the logits (first maximum wins; NaN never wins).

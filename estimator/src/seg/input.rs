@@ -211,6 +211,12 @@ impl FrameMap {
         (a as usize, b as usize, f)
     }
 
+    /// The output cell `(cx, cy)` that frame pixel `(u, v)` upsamples from.
+    #[inline]
+    pub fn cell_of(&self, u: usize, v: usize) -> (usize, usize) {
+        (self.up_x[u] as usize, self.up_y[v] as usize)
+    }
+
     /// Nearest upsampling of per-cell labels `[out_h * out_w]` to the frame (`labels_out`: width * height).
     pub fn upsample(&self, cells: &[u16], labels_out: &mut [u16]) {
         for (v, row) in labels_out.chunks_exact_mut(self.width).enumerate().take(self.height) {

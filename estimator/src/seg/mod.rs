@@ -6,16 +6,18 @@
 //! Layout: [`config`] (architecture, tensor shapes, cost), [`file`] (weight
 //! file reading and object-set checks), [`input`] (frame ↔ grid tables:
 //! network input, upsampling, training targets), [`engine`] (the forward pass
-//! on preallocated buffers), [`boundary`] (cell labels → frame labels). The trainer is `fusepose_train::seg`.
+//! on preallocated buffers), [`boundary`] (cell labels → frame labels), [`voting`] (instances from centre-offset votes). The trainer is `fusepose_train::seg`.
 
 pub mod boundary;
 pub mod config;
 pub mod engine;
 pub mod file;
 pub mod input;
+pub mod voting;
 
 pub use boundary::Boundary;
 pub use config::SegConfig;
 pub use engine::{SegEngine, SegError};
 pub use file::SegFile;
 pub use input::FrameMap;
+pub use voting::VotingParams;

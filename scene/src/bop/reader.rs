@@ -54,6 +54,9 @@ pub struct BopFrame {
     /// Class-id plane from the visible masks: `obj_id` where instance is
     /// visible, 0 = background; later instances win on (invalid) overlaps.
     pub labels: Vec<u16>,
+    /// Instance plane from the same masks: `k + 1` where ground-truth
+    /// instance `k` (`gt[k]`) is visible, 0 = background.
+    pub instances: Vec<u16>,
 }
 
 impl BopFrame {
@@ -257,15 +260,18 @@ impl BopDataset {
             return Err(invalid(&depth_path, format!("{}x{} but the RGB image is {w}x{h}", depth.width, depth.height)));
         }
         let mut labels = vec![0u16; w as usize * h as usize];
+        let mut instances = vec![0u16; labels.len()];
         for (k, g) in r.gt.iter().enumerate() {
             let p = r.scene_dir.join("mask_visib").join(format!("{im:06}_{k:06}.png"));
             let mask = read_mask(&p).map_err(image_err(&p))?;
             if (mask.width, mask.height) != (w, h) {
                 return Err(invalid(&p, format!("{}x{} but the RGB image is {w}x{h}", mask.width, mask.height)));
             }
-            for (l, &m) in labels.iter_mut().zip(&mask.data) {
+            let id = u16::try_from(k + 1).unwrap_or(u16::MAX);
+            for ((l, i), &m) in labels.iter_mut().zip(instances.iter_mut()).zip(&mask.data) {
                 if m {
                     *l = g.obj_id;
+                    *i = id;
                 }
             }
         }
@@ -278,6 +284,7 @@ impl BopDataset {
             depth_unit_m: r.depth_scale / 1000.0,
             gt: r.gt.clone(),
             labels,
+            instances,
         })
     }
 

@@ -1,6 +1,10 @@
 //! Wavefront OBJ + MTL loading through `tobj`: triangulated, one index per
 //! vertex, diffuse colours and `map_Kd` textures (PNG/JPEG), vertex colours,
 //! normals and UVs; one material index per triangle.
+//!
+//! As the MTL specification says, the diffuse texture is multiplied by `Kd`:
+//! the loaded texture holds `Kd × texel` (in linear light), so a mesh looks as
+//! it does in other tools. A material without `Kd` multiplies by 1.
 
 use std::collections::HashMap;
 use std::fs::File;
@@ -112,6 +116,11 @@ fn convert_materials(obj: &Path, dir: &Path, mats: &[tobj::Material]) -> Vec<Mat
                     })
                     .clone()
             });
+            // map_Kd is multiplied by Kd (white when Kd is absent).
+            let texture = match (texture, m.diffuse) {
+                (Some(t), Some(kd)) if kd != [1.0; 3] => Some(tint_texture(&t, kd)),
+                (t, _) => t,
+            };
             Material { name: m.name.clone(), diffuse: m.diffuse.unwrap_or(DEFAULT_DIFFUSE), texture }
         })
         .collect();
@@ -123,6 +132,32 @@ fn convert_materials(obj: &Path, dir: &Path, mats: &[tobj::Material]) -> Vec<Mat
         );
     }
     out
+}
+
+/// sRGB byte → linear 0..1.
+fn srgb_decode(c: u8) -> f32 {
+    let c = c as f32 / 255.0;
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// Linear 0..1 → sRGB byte.
+fn srgb_encode(l: f32) -> u8 {
+    let l = l.clamp(0.0, 1.0);
+    let c = if l <= 0.003_130_8 { l * 12.92 } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
+    (c * 255.0).round() as u8
+}
+
+/// The texture multiplied by a linear colour `kd` (per channel, in linear light).
+pub(crate) fn tint_texture(t: &Texture, kd: [f32; 3]) -> Texture {
+    // One table per channel: 256 entries instead of a powf per texel.
+    let lut: [[u8; 256]; 3] =
+        std::array::from_fn(|c| std::array::from_fn(|v| srgb_encode(srgb_decode(v as u8) * kd[c])));
+    let rgb = t
+        .rgb
+        .chunks_exact(3)
+        .flat_map(|p| [lut[0][p[0] as usize], lut[1][p[1] as usize], lut[2][p[2] as usize]])
+        .collect();
+    Texture { width: t.width, height: t.height, rgb }
 }
 
 /// `map_Kd` may carry options before the file name (`-s 1 1 1 tex.png`):

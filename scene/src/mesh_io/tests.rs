@@ -80,7 +80,11 @@ fn obj_with_materials_texture_normals_and_uvs_loads() {
     let lid = mesh.materials.iter().position(|m| m.name == "lid").unwrap();
     let texture = mesh.materials[body].texture.as_ref().expect("body texture loaded");
     assert_eq!((texture.width, texture.height), (2, 1));
-    assert_eq!(texture.rgb, pixels);
+    // map_Kd is multiplied by Kd 0.8 0.1 0.1 (linear light).
+    assert_eq!(
+        texture,
+        &crate::mesh_io::obj::tint_texture(&Texture { width: 2, height: 1, rgb: pixels }, [0.8, 0.1, 0.1])
+    );
     assert_eq!(mesh.materials[lid].diffuse, [0.1, 0.2, 0.9]);
     assert!(mesh.materials[lid].texture.is_none());
     // Exactly the two +z triangles use the lid material, and their vertices are at z = 0.5.

@@ -81,11 +81,11 @@ impl NoiseConfig {
 }
 
 /// Bits of the Gaussian table index.
-const GAUSS_BITS: u32 = 12;
+pub(super) const GAUSS_BITS: u32 = 12;
 
 /// 4096 equiprobable standard-normal values (inverse CDF at bin midpoints,
 /// rescaled to unit variance): a table lookup per sample instead of Box–Muller.
-fn gauss_table() -> &'static [f32; 1 << GAUSS_BITS] {
+pub(super) fn gauss_table() -> &'static [f32; 1 << GAUSS_BITS] {
     static T: OnceLock<[f32; 1 << GAUSS_BITS]> = OnceLock::new();
     T.get_or_init(|| {
         let n = 1usize << GAUSS_BITS;
@@ -149,6 +149,27 @@ pub fn apply_noise(target: &mut RenderTarget, cfg: &NoiseConfig, seed: u64) {
     }
     let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
     noise_depth(target, cfg, &mut rng);
+    blur_rgb(target, cfg.rgb_blur_sigma_px);
+    noise_rgb(target, cfg.rgb_sigma, &mut rng);
+}
+
+/// The depth part of [`apply_noise`] alone: the same depth as `apply_noise`
+/// with the same config and seed, colour untouched.
+pub fn apply_noise_depth(target: &mut RenderTarget, cfg: &NoiseConfig, seed: u64) {
+    if !cfg.enabled || target.pixel_count() == 0 {
+        return;
+    }
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
+    noise_depth(target, cfg, &mut rng);
+}
+
+/// The colour part of [`apply_noise`] alone (blur, then Gaussian noise drawn
+/// from `seed`); depth untouched.
+pub fn apply_noise_colour(target: &mut RenderTarget, cfg: &NoiseConfig, seed: u64) {
+    if !cfg.enabled || target.pixel_count() == 0 {
+        return;
+    }
+    let mut rng = rand_pcg::Pcg64Mcg::seed_from_u64(seed);
     blur_rgb(target, cfg.rgb_blur_sigma_px);
     noise_rgb(target, cfg.rgb_sigma, &mut rng);
 }

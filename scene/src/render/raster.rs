@@ -18,9 +18,11 @@ const GUARD_PX: f64 = 8192.0;
 const INVALID: u8 = 0x80;
 /// Marks "no texture" in [`TriShade::texture`].
 pub(super) const NO_TEXTURE: u32 = u32::MAX;
-/// Attributes interpolated per vertex: u, v, then three colour channels
-/// (shade for textured triangles, albedo × shade otherwise), all linear.
-pub(super) const N_ATTR: usize = 5;
+/// Attributes interpolated per vertex, all linear. Gouraud mode: u, v, three
+/// colour channels (shade for textured triangles, albedo × shade otherwise),
+/// the albedo's luminance (untextured), two unused. Per-pixel-lighting mode:
+/// u, v, albedo (untextured), then the unit normal facing the camera.
+pub(super) const N_ATTR: usize = 8;
 
 /// A projected vertex: pixel coordinates, inverse depth (1/m) and attributes.
 #[derive(Clone, Copy, Debug)]
@@ -110,6 +112,7 @@ pub(super) fn rasterise_items<'a>(
     items: &[RenderItem<'a>],
     k: &Intrinsics,
     settings: &RenderSettings,
+    lit: bool,
     target: &mut RenderTarget,
 ) -> Vec<&'a Texture> {
     target.inv_depth.fill(0.0);
@@ -131,7 +134,7 @@ pub(super) fn rasterise_items<'a>(
         tris: &mut target.tris,
     };
     for (idx, item) in items.iter().enumerate() {
-        let alone = rasterise_item(idx, item, &planes, settings, &mut frame, &mut verts, &mut textures);
+        let alone = rasterise_item(idx, item, &planes, settings, lit, &mut frame, &mut verts, &mut textures);
         coverage.push(ItemCoverage {
             instance_label: item.instance_label,
             visible_pixels: 0,
@@ -143,11 +146,13 @@ pub(super) fn rasterise_items<'a>(
     textures
 }
 
+#[allow(clippy::too_many_arguments)]
 fn rasterise_item<'a>(
     idx: usize,
     item: &RenderItem<'a>,
     planes: &[[f64; 4]; 5],
     settings: &RenderSettings,
+    lit: bool,
     frame: &mut Frame<'_>,
     verts: &mut Vec<CamVertex>,
     textures: &mut Vec<&'a Texture>,
@@ -190,8 +195,10 @@ fn rasterise_item<'a>(
             if len > 0.0 && len.is_finite() {
                 v.n = [n[0] / len, n[1] / len, n[2] / len];
             }
-            v.shade_front = shading::lambert(lighting, &v.n, 1.0);
-            v.shade_back = shading::lambert(lighting, &v.n, -1.0);
+            if !lit {
+                v.shade_front = shading::lambert(lighting, &v.n, 1.0);
+                v.shade_back = shading::lambert(lighting, &v.n, -1.0);
+            }
         }
         v
     }));
@@ -246,13 +253,27 @@ fn rasterise_item<'a>(
         let mi = mesh.triangle_materials.get(ti).copied().unwrap_or(0) as usize;
         let material = mesh.materials.get(mi);
         let texture = texture_of(mi);
-        let flat_shade = if has_normals {
+        let flat_shade = if has_normals || lit {
             [0.0; 3]
         } else {
             shading::lambert(&settings.lighting, &nf, if back { -1.0 } else { 1.0 })
         };
+        let side = if back { -1.0f32 } else { 1.0 };
         let mut clip = [ClipVert::default(); 3];
         for (c, (&vi, v)) in clip.iter_mut().zip([(&i0, v0), (&i1, v1), (&i2, v2)]) {
+            c.p = v.p;
+            if lit {
+                // Albedo and the normal of the side we see; lighting per pixel.
+                let n = if has_normals { v.n } else { nf };
+                let n = [n[0] as f32 * side, n[1] as f32 * side, n[2] as f32 * side];
+                let (uv, albedo) = if texture != NO_TEXTURE {
+                    (mesh.uvs[vi], [1.0; 3])
+                } else {
+                    ([0.0; 2], vertex_albedo(mesh, vi, material, default_albedo))
+                };
+                c.a = [uv[0], uv[1], albedo[0], albedo[1], albedo[2], n[0], n[1], n[2]];
+                continue;
+            }
             let shade = if !has_normals {
                 flat_shade
             } else if back {
@@ -260,19 +281,21 @@ fn rasterise_item<'a>(
             } else {
                 v.shade_front
             };
-            c.p = v.p;
             if texture != NO_TEXTURE {
                 let uv = mesh.uvs[vi];
-                c.a = [uv[0], uv[1], shade[0], shade[1], shade[2]];
+                c.a = [uv[0], uv[1], shade[0], shade[1], shade[2], 0.0, 0.0, 0.0];
             } else {
-                let albedo = if let Some(col) = mesh.colors.get(vi) {
-                    [shading::srgb_to_linear(col[0]), shading::srgb_to_linear(col[1]), shading::srgb_to_linear(col[2])]
-                } else if let Some(m) = material {
-                    m.diffuse
-                } else {
-                    default_albedo
-                };
-                c.a = [0.0, 0.0, albedo[0] * shade[0], albedo[1] * shade[1], albedo[2] * shade[2]];
+                let albedo = vertex_albedo(mesh, vi, material, default_albedo);
+                c.a = [
+                    0.0,
+                    0.0,
+                    albedo[0] * shade[0],
+                    albedo[1] * shade[1],
+                    albedo[2] * shade[2],
+                    shading::luminance(albedo),
+                    0.0,
+                    0.0,
+                ];
             }
         }
         // Plane n·X = d: along the ray X = z·((x − cx)/fx, (y − cy)/fy, 1),
@@ -297,6 +320,18 @@ fn rasterise_item<'a>(
     alone
 }
 
+/// Linear albedo of an untextured vertex: its colour, else its material's.
+#[inline]
+fn vertex_albedo(mesh: &crate::Mesh, vi: usize, material: Option<&crate::Material>, default: [f32; 3]) -> [f32; 3] {
+    if let Some(col) = mesh.colors.get(vi) {
+        [shading::srgb_to_linear(col[0]), shading::srgb_to_linear(col[1]), shading::srgb_to_linear(col[2])]
+    } else if let Some(m) = material {
+        m.diffuse
+    } else {
+        default
+    }
+}
+
 #[inline]
 fn project(k: &Intrinsics, c: &ClipVert) -> ScreenVert {
     let w = 1.0 / c.p[2];
@@ -311,47 +346,10 @@ fn clip_and_rasterise(
     tri: [ClipVert; 3],
     ctx: &TriContext,
 ) -> u32 {
-    const MAX: usize = 3 + 5 + 1;
-    let mut poly = [ClipVert::default(); MAX];
-    let mut next = [ClipVert::default(); MAX];
-    poly[..3].copy_from_slice(&tri);
-    let mut n = 3;
-    for (b, pl) in planes.iter().enumerate() {
-        if outcodes & (1 << b) == 0 {
-            continue;
-        }
-        let mut m = 0;
-        for i in 0..n {
-            let cur = poly[i];
-            let nxt = poly[(i + 1) % n];
-            let dc = plane_dist(pl, &cur.p);
-            let dn = plane_dist(pl, &nxt.p);
-            if dc >= 0.0 && m < MAX {
-                next[m] = cur;
-                m += 1;
-            }
-            if (dc >= 0.0) != (dn >= 0.0) && m < MAX {
-                let s = dc / (dc - dn);
-                let mut v = ClipVert::default();
-                for j in 0..3 {
-                    v.p[j] = cur.p[j] + s * (nxt.p[j] - cur.p[j]);
-                }
-                let sf = s as f32;
-                for j in 0..N_ATTR {
-                    v.a[j] = cur.a[j] + sf * (nxt.a[j] - cur.a[j]);
-                }
-                next[m] = v;
-                m += 1;
-            }
-        }
-        std::mem::swap(&mut poly, &mut next);
-        n = m;
-        if n < 3 {
-            return 0;
-        }
-    }
+    let mut poly = [ClipVert::default(); CLIP_MAX];
+    let n = clip_polygon(planes, outcodes, tri, &mut poly);
     let mut alone = 0;
-    for i in 1..n - 1 {
+    for i in 1..n.saturating_sub(1) {
         if poly[0].p[2] <= 0.0 || poly[i].p[2] <= 0.0 || poly[i + 1].p[2] <= 0.0 {
             continue;
         }
@@ -451,4 +449,175 @@ fn rasterise_triangle(frame: &mut Frame<'_>, mut sv: [ScreenVert; 3], ctx: &TriC
         e2.row_start += e2.step_y;
     }
     alone
+}
+
+/// Depth-only rasterisation (shadow maps): writes the nearest inverse depth
+/// (1/m) per pixel of `items`, each posed by `view_from_cam * item.pose`, into
+/// `inv_depth` (`k.width * k.height`, cleared by the caller). Same coverage
+/// rules and clipping as the colour pass.
+pub(super) fn rasterise_depth(
+    items: &[RenderItem<'_>],
+    view_from_cam: &crate::Pose,
+    k: &Intrinsics,
+    z_near: f64,
+    inv_depth: &mut [f32],
+    scratch: &mut Vec<CamVertex>,
+) {
+    let planes = clip_planes(k, z_near);
+    let (width, height) = (k.width as i64, k.height as i64);
+    for item in items {
+        let pose = view_from_cam * item.pose;
+        let rot = pose.rotation.to_rotation_matrix();
+        let r = rot.matrix();
+        let t = pose.translation.vector;
+        scratch.clear();
+        scratch.extend(item.mesh.positions.iter().map(|q| {
+            let q = [q[0] as f64, q[1] as f64, q[2] as f64];
+            let p = [
+                r[(0, 0)] * q[0] + r[(0, 1)] * q[1] + r[(0, 2)] * q[2] + t[0],
+                r[(1, 0)] * q[0] + r[(1, 1)] * q[1] + r[(1, 2)] * q[2] + t[1],
+                r[(2, 0)] * q[0] + r[(2, 1)] * q[1] + r[(2, 2)] * q[2] + t[2],
+            ];
+            let mut v = CamVertex { p, ..Default::default() };
+            if !p.iter().all(|c| c.is_finite()) {
+                v.outcode = INVALID;
+                return v;
+            }
+            for (b, pl) in planes.iter().enumerate() {
+                if plane_dist(pl, &p) < 0.0 {
+                    v.outcode |= 1 << b;
+                }
+            }
+            v
+        }));
+        for tri in &item.mesh.triangles {
+            let (v0, v1, v2) = (&scratch[tri[0] as usize], &scratch[tri[1] as usize], &scratch[tri[2] as usize]);
+            let or = v0.outcode | v1.outcode | v2.outcode;
+            if or & INVALID != 0 || v0.outcode & v1.outcode & v2.outcode != 0 {
+                continue;
+            }
+            let nf = cross(&sub(&v1.p, &v0.p), &sub(&v2.p, &v0.p));
+            let len = dot(&nf, &nf).sqrt();
+            if len == 0.0 || !len.is_finite() {
+                continue;
+            }
+            let nf = [nf[0] / len, nf[1] / len, nf[2] / len];
+            let d = dot(&nf, &v0.p);
+            let w_plane = if d.abs() > 1e-12 {
+                let (a, b) = (nf[0] / (k.fx * d), nf[1] / (k.fy * d));
+                [a, b, nf[2] / d - a * k.cx - b * k.cy]
+            } else {
+                [0.0, 0.0, 1.0 / v0.p[2].max(z_near)]
+            };
+            let clip = [v0, v1, v2].map(|v| ClipVert { p: v.p, a: [0.0; N_ATTR] });
+            if or == 0 {
+                let sv = clip.map(|c| project(k, &c));
+                depth_triangle(width, height, inv_depth, sv, w_plane);
+            } else {
+                let mut poly = [ClipVert::default(); CLIP_MAX];
+                let n = clip_polygon(&planes, or, clip, &mut poly);
+                for i in 1..n.saturating_sub(1) {
+                    if poly[0].p[2] <= 0.0 || poly[i].p[2] <= 0.0 || poly[i + 1].p[2] <= 0.0 {
+                        continue;
+                    }
+                    let sv = [project(k, &poly[0]), project(k, &poly[i]), project(k, &poly[i + 1])];
+                    depth_triangle(width, height, inv_depth, sv, w_plane);
+                }
+            }
+        }
+    }
+}
+
+/// Most vertices a triangle clipped by the five planes can have.
+const CLIP_MAX: usize = 3 + 5 + 1;
+
+/// Sutherland–Hodgman of one triangle against the planes flagged in
+/// `outcodes`; returns the polygon's vertex count (< 3: nothing left).
+fn clip_polygon(planes: &[[f64; 4]; 5], outcodes: u8, tri: [ClipVert; 3], poly: &mut [ClipVert; CLIP_MAX]) -> usize {
+    let mut next = [ClipVert::default(); CLIP_MAX];
+    poly[..3].copy_from_slice(&tri);
+    let mut n = 3;
+    for (b, pl) in planes.iter().enumerate() {
+        if outcodes & (1 << b) == 0 {
+            continue;
+        }
+        let mut m = 0;
+        for i in 0..n {
+            let cur = poly[i];
+            let nxt = poly[(i + 1) % n];
+            let dc = plane_dist(pl, &cur.p);
+            let dn = plane_dist(pl, &nxt.p);
+            if dc >= 0.0 && m < CLIP_MAX {
+                next[m] = cur;
+                m += 1;
+            }
+            if (dc >= 0.0) != (dn >= 0.0) && m < CLIP_MAX {
+                let s = dc / (dc - dn);
+                let mut v = ClipVert::default();
+                for j in 0..3 {
+                    v.p[j] = cur.p[j] + s * (nxt.p[j] - cur.p[j]);
+                }
+                let sf = s as f32;
+                for j in 0..N_ATTR {
+                    v.a[j] = cur.a[j] + sf * (nxt.a[j] - cur.a[j]);
+                }
+                next[m] = v;
+                m += 1;
+            }
+        }
+        std::mem::swap(poly, &mut next);
+        n = m;
+        if n < 3 {
+            return 0;
+        }
+    }
+    n
+}
+
+/// [`rasterise_triangle`] without shading data: nearest inverse depth only.
+fn depth_triangle(width: i64, height: i64, inv_depth: &mut [f32], mut sv: [ScreenVert; 3], w_plane: [f64; 3]) {
+    let snap = |v: &ScreenVert| ((v.x * SUBPIXEL).round() as i64, (v.y * SUBPIXEL).round() as i64);
+    let mut p = [snap(&sv[0]), snap(&sv[1]), snap(&sv[2])];
+    let area = (p[1].0 - p[0].0) * (p[2].1 - p[0].1) - (p[2].0 - p[0].0) * (p[1].1 - p[0].1);
+    if area == 0 {
+        return;
+    }
+    if area < 0 {
+        p.swap(1, 2);
+        sv.swap(1, 2);
+    }
+    let one = 1i64 << SUBPIXEL_BITS;
+    let x0 = ((p[0].0.min(p[1].0).min(p[2].0) + one - 1) >> SUBPIXEL_BITS).max(0);
+    let x1 = (p[0].0.max(p[1].0).max(p[2].0) >> SUBPIXEL_BITS).min(width - 1);
+    let y0 = ((p[0].1.min(p[1].1).min(p[2].1) + one - 1) >> SUBPIXEL_BITS).max(0);
+    let y1 = (p[0].1.max(p[1].1).max(p[2].1) >> SUBPIXEL_BITS).min(height - 1);
+    if x0 > x1 || y0 > y1 {
+        return;
+    }
+    let mut e0 = Edge::new(p[1], p[2], x0, y0);
+    let mut e1 = Edge::new(p[2], p[0], x0, y0);
+    let mut e2 = Edge::new(p[0], p[1], x0, y0);
+    let w_min = sv[0].w.min(sv[1].w).min(sv[2].w);
+    let w_max = sv[0].w.max(sv[1].w).max(sv[2].w);
+    let [wa, wb, wc] = w_plane;
+    let w_usize = width as usize;
+    for y in y0..=y1 {
+        let (mut a, mut b, mut c) = (e0.row_start, e1.row_start, e2.row_start);
+        let w_row = wb * y as f64 + wc;
+        let row = &mut inv_depth[y as usize * w_usize..(y as usize + 1) * w_usize];
+        for (x, px) in row.iter_mut().enumerate().take(x1 as usize + 1).skip(x0 as usize) {
+            if (a | b | c) >= 0 {
+                let w = (wa * x as f64 + w_row).clamp(w_min, w_max) as f32;
+                if w > *px {
+                    *px = w;
+                }
+            }
+            a += e0.step_x;
+            b += e1.step_x;
+            c += e2.step_x;
+        }
+        e0.row_start += e0.step_y;
+        e1.row_start += e1.step_y;
+        e2.row_start += e2.step_y;
+    }
 }

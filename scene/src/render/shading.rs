@@ -8,6 +8,18 @@ use super::{Lighting, RenderItem, RenderSettings, TextureFilter, depth_to_u16};
 use crate::Texture;
 use std::sync::OnceLock;
 
+/// Rec. 709 luminance of a linear RGB colour.
+#[inline]
+pub(super) fn luminance(c: [f32; 3]) -> f32 {
+    0.2126 * c[0] + 0.7152 * c[1] + 0.0722 * c[2]
+}
+
+/// Linear 0..1 → 0..255 byte (clamped).
+#[inline]
+pub(super) fn unit_to_u8(x: f32) -> u8 {
+    (x.clamp(0.0, 1.0) * 255.0 + 0.5) as u8
+}
+
 /// Lambert + ambient for unit normal `n` (camera frame), seen from side `sign` (±1).
 pub(super) fn lambert(l: &Lighting, n: &[f64; 3], sign: f64) -> [f32; 3] {
     let mut s = l.ambient;
@@ -21,7 +33,7 @@ pub(super) fn lambert(l: &Lighting, n: &[f64; 3], sign: f64) -> [f32; 3] {
     s
 }
 
-fn srgb_decode_table() -> &'static [f32; 256] {
+pub(super) fn srgb_decode_table() -> &'static [f32; 256] {
     static T: OnceLock<[f32; 256]> = OnceLock::new();
     T.get_or_init(|| {
         std::array::from_fn(|i| {
@@ -32,9 +44,9 @@ fn srgb_decode_table() -> &'static [f32; 256] {
 }
 
 /// Entries of the linear → sRGB table (12-bit input).
-const ENCODE_STEPS: usize = 4096;
+pub(super) const ENCODE_STEPS: usize = 4096;
 
-fn srgb_encode_table() -> &'static [u8; ENCODE_STEPS] {
+pub(super) fn srgb_encode_table() -> &'static [u8; ENCODE_STEPS] {
     static T: OnceLock<[u8; ENCODE_STEPS]> = OnceLock::new();
     T.get_or_init(|| {
         std::array::from_fn(|i| {
@@ -96,6 +108,14 @@ impl TriShade {
         TriShade { item, texture, x0: x0 as f32, y0: y0 as f32, w_plane, attr_planes, normal }
     }
 
+    /// The geometric normal (unit, camera frame) flipped towards the camera
+    /// side it is seen from, approximately (for degenerate interpolated normals).
+    #[inline]
+    pub(super) fn normal_facing(&self) -> [f32; 3] {
+        let n = self.normal;
+        if n[2] > 0.0 { [-n[0], -n[1], -n[2]] } else { n }
+    }
+
     /// |cos| of the angle between the surface and the ray through pixel (x, y).
     #[inline]
     pub(super) fn cos_incidence(&self, rx: f32, ry: f32) -> f32 {
@@ -105,7 +125,7 @@ impl TriShade {
 
     /// Interpolated attributes at pixel (x, y).
     #[inline]
-    fn attributes(&self, x: f32, y: f32) -> [f32; N_ATTR] {
+    pub(super) fn attributes(&self, x: f32, y: f32) -> [f32; N_ATTR] {
         let (dx, dy) = (x - self.x0, y - self.y0);
         let w = self.w_plane[2] + self.w_plane[0] * dx + self.w_plane[1] * dy;
         let inv_w = if w > 0.0 { 1.0 / w } else { 0.0 };
@@ -119,14 +139,14 @@ impl TriShade {
 /// `floor` without a libm call (baseline x86-64 has no SSE4.1 `roundss`);
 /// exact for |x| < 2^31, NaN → 0.
 #[inline]
-fn fast_floor(x: f32) -> f32 {
+pub(super) fn fast_floor(x: f32) -> f32 {
     let i = x as i32 as f32;
     if i > x { i - 1.0 } else { i }
 }
 
 /// Samples a texture (wrapping) at (u, v); v = 1 is the top row. Linear RGB.
 #[inline]
-fn sample(dec: &[f32; 256], tex: &Texture, u: f32, v: f32, filter: TextureFilter) -> [f32; 3] {
+pub(super) fn sample(dec: &[f32; 256], tex: &Texture, u: f32, v: f32, filter: TextureFilter) -> [f32; 3] {
     let (w, h) = (tex.width as usize, tex.height as usize);
     let fu = u - fast_floor(u);
     let fv = 1.0 - (v - fast_floor(v));
@@ -189,6 +209,8 @@ pub(super) fn resolve(
                 t.depth_m[p] = 0.0;
                 t.depth_u16[p] = 0;
                 t.labels[p] = 0;
+                t.reflectance[p] = 0;
+                t.specular[p] = 0;
                 continue;
             }
             let s = &t.tris[id as usize];
@@ -204,10 +226,13 @@ pub(super) fn resolve(
             let a = s.attributes(x as f32, y as f32);
             let lin = if s.texture != NO_TEXTURE {
                 let albedo = sample(dec, textures[s.texture as usize], a[0], a[1], filter);
+                t.reflectance[p] = unit_to_u8(luminance(albedo));
                 [albedo[0] * a[2], albedo[1] * a[3], albedo[2] * a[4]]
             } else {
+                t.reflectance[p] = unit_to_u8(a[5]);
                 [a[2], a[3], a[4]]
             };
+            t.specular[p] = 0;
             let o = &mut t.rgb[p * 3..p * 3 + 3];
             o[0] = linear_to_srgb(enc, lin[0]);
             o[1] = linear_to_srgb(enc, lin[1]);

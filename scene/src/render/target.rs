@@ -79,6 +79,15 @@ pub struct RenderTarget {
     pub(super) tris: Vec<TriShade>,
     pub(super) scratch_f32: Vec<f32>,
     pub(super) scratch_rgb: Vec<u8>,
+    /// Albedo luminance per pixel (0..255 linear), for the active-sensor models.
+    pub(super) reflectance: Vec<u8>,
+    /// Specular highlight strength per pixel (0..255), per-pixel mode only.
+    pub(super) specular: Vec<u8>,
+    /// Shadow-map buffers kept between frames.
+    pub(super) shadow_pool: Vec<Vec<f32>>,
+    /// More scratch for the sensor models.
+    pub(super) scratch_f32b: Vec<f32>,
+    pub(super) scratch_u8: Vec<u8>,
 }
 
 impl RenderTarget {
@@ -111,6 +120,10 @@ impl RenderTarget {
         self.stamp.resize(n, 0);
         self.scratch_f32.resize(n, 0.0);
         self.scratch_rgb.resize(n * 3, 0);
+        self.reflectance.resize(n, 0);
+        self.specular.resize(n, 0);
+        self.scratch_f32b.resize(n, 0.0);
+        self.scratch_u8.resize(n, 0);
     }
 
     pub fn width(&self) -> u32 {
@@ -143,6 +156,23 @@ impl RenderTarget {
     /// Label map: the visible item's `instance_label`; 0 = background.
     pub fn labels(&self) -> &[u16] {
         &self.labels
+    }
+
+    /// Albedo luminance of the visible surface (linear, 0..255; 0 where
+    /// nothing is drawn): the active-sensor models' reflectance.
+    pub fn reflectance(&self) -> &[u8] {
+        &self.reflectance
+    }
+
+    /// Specular highlight strength per pixel (0..255; per-pixel mode only,
+    /// else 0): where structured-light sensors lose depth on glare.
+    pub fn specular(&self) -> &[u8] {
+        &self.specular
+    }
+
+    /// Mutable RGB plane (for post-processing such as the camera pipeline).
+    pub fn rgb_mut(&mut self) -> &mut [u8] {
+        &mut self.rgb
     }
 
     /// Coverage of each item of the last `render_scene` call, in item order.

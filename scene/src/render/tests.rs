@@ -139,7 +139,7 @@ fn texture_quadrants_appear_where_expected() {
     let mesh = quad_mesh(0.2, 0.2, 1.0, textured_material("quadrants", tex));
     let p = pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]);
     let settings = RenderSettings {
-        lighting: Lighting { ambient: [1.0; 3], lights: vec![] },
+        lighting: Lighting { ambient: [1.0; 3], lights: vec![], points: vec![] },
         texture_filter: TextureFilter::Nearest,
         ..Default::default()
     };
@@ -169,7 +169,10 @@ fn perspective_correct_vertex_colours() {
     mesh.colors = vec![[0, 0, 0], [0, 0, 0], [255, 255, 255], [255, 255, 255]];
     mesh.uvs.clear();
     let p = pose([-1.1, 0.0, 0.0], [0.0, 0.0, 0.7]);
-    let settings = RenderSettings { lighting: Lighting { ambient: [1.0; 3], lights: vec![] }, ..Default::default() };
+    let settings = RenderSettings {
+        lighting: Lighting { ambient: [1.0; 3], lights: vec![], points: vec![] },
+        ..Default::default()
+    };
     let mut t = RenderTarget::for_intrinsics(&k);
     render_scene(&[RenderItem { mesh: &mesh, pose: p, instance_label: 1 }], &k, &settings, &mut t).unwrap();
     // The 3D midline (y = 0) must be mid grey in linear light: sRGB 188.
@@ -347,4 +350,243 @@ fn noise_drops_depth_at_discontinuities_and_grazing_angles() {
     }
     assert!(edge > 20);
     assert!(edge_missing as f64 > 0.6 * edge as f64, "{edge_missing} of {edge} edges lost depth");
+}
+
+/// Plain white light from `dir` (towards the light, camera frame) with some ambient.
+fn one_light(dir: [f64; 3], ambient: f32, intensity: f32) -> Lighting {
+    Lighting {
+        ambient: [ambient; 3],
+        lights: vec![DirectionalLight { direction: Vector3::from(dir).normalize(), color: [intensity; 3] }],
+        points: vec![],
+    }
+}
+
+/// Does the ray from `p` along `d` hit the axis-aligned box [lo, hi]?
+fn ray_hits_box(p: &Vector3<f64>, d: &Vector3<f64>, lo: [f64; 3], hi: [f64; 3]) -> bool {
+    let (mut t0, mut t1) = (1e-9, f64::INFINITY);
+    for a in 0..3 {
+        if d[a].abs() < 1e-15 {
+            if p[a] < lo[a] || p[a] > hi[a] {
+                return false;
+            }
+            continue;
+        }
+        let (mut ta, mut tb) = ((lo[a] - p[a]) / d[a], (hi[a] - p[a]) / d[a]);
+        if ta > tb {
+            std::mem::swap(&mut ta, &mut tb);
+        }
+        t0 = f64::max(t0, ta);
+        t1 = f64::min(t1, tb);
+    }
+    t0 <= t1
+}
+
+#[test]
+fn box_on_a_plane_casts_the_geometric_shadow() {
+    let k = k_small();
+    // A plane 1 m away facing the camera, a 10 cm cube standing on it
+    // (camera frame: the cube spans z 0.9..1.0), lit from the left and front.
+    let plane = quad_mesh(0.6, 0.6, 1.0, grey());
+    let cube = box_mesh([0.05; 3], 1.0, grey());
+    let plane_pose = pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]);
+    let cube_pose = pose([0.0; 3], [-0.05, 0.02, 0.95]);
+    let items = [
+        RenderItem { mesh: &plane, pose: plane_pose, instance_label: 0 },
+        RenderItem { mesh: &cube, pose: cube_pose, instance_label: 1 },
+    ];
+    let light = Vector3::new(-0.8, 0.25, -0.55).normalize();
+    let settings = RenderSettings {
+        lighting: one_light([light.x, light.y, light.z], 0.2, 0.8),
+        shadows: ShadowSettings { enabled: true, ..Default::default() },
+        ..Default::default()
+    };
+    let mut t = RenderTarget::for_intrinsics(&k);
+    render_scene(&items, &k, &settings, &mut t).unwrap();
+    // Without shadows the plane is uniformly lit: the reference colours.
+    let mut unshadowed = RenderTarget::for_intrinsics(&k);
+    let no_shadow = RenderSettings { shadows: ShadowSettings::default(), ..settings.clone() };
+    render_scene(&items, &k, &no_shadow, &mut unshadowed).unwrap();
+    let (lo, hi) = ([-0.1, -0.03, 0.9], [0.0, 0.07, 1.0]);
+    let (mut shadow_px, mut lit_px, mut wrong) = (0, 0, Vec::new());
+    for v in 0..k.height {
+        for u in 0..k.width {
+            let i = (v * k.width + u) as usize;
+            if t.labels()[i] != 0 || t.depth_m()[i] == 0.0 {
+                continue;
+            }
+            let p = k.back_project(u as f64, v as f64, t.depth_m()[i] as f64).coords;
+            let shadowed = ray_hits_box(&p, &light, lo, hi);
+            // Skip the penumbra: pixels whose neighbours (±2 px) disagree.
+            let near_edge = [(-2.0, 0.0), (2.0, 0.0), (0.0, -2.0), (0.0, 2.0)].iter().any(|(du, dv)| {
+                let q = k.back_project(u as f64 + du, v as f64 + dv, 1.0).coords;
+                ray_hits_box(&q, &light, lo, hi) != shadowed
+            });
+            if near_edge {
+                continue;
+            }
+            let (g, g_ref) = (t.rgb()[i * 3] as i32, unshadowed.rgb()[i * 3] as i32);
+            if shadowed {
+                shadow_px += 1;
+                // Ambient only: sRGB of 0.5 * 0.2 = 0.1 linear is 89.
+                if (g - 89).abs() > 3 {
+                    wrong.push((u, v, g, "shadow"));
+                }
+            } else {
+                lit_px += 1;
+                if (g - g_ref).abs() > 2 {
+                    wrong.push((u, v, g, "lit"));
+                }
+            }
+        }
+    }
+    assert!(shadow_px > 800, "shadow footprint too small: {shadow_px} px");
+    assert!(lit_px > 20_000, "{lit_px} lit px");
+    assert!(
+        wrong.len() * 200 < shadow_px + lit_px,
+        "{} of {} pixels disagree with the geometric shadow, e.g. {:?}",
+        wrong.len(),
+        shadow_px + lit_px,
+        &wrong[..wrong.len().min(8)]
+    );
+    // The shadow falls on the side away from the light (+x, right of the cube).
+    let cube_box = t.coverage()[1].bbox.unwrap();
+    let dark_right = (cube_box.u_max + 3..k.width).filter(|&u| {
+        let i = ((cube_box.v_min + cube_box.v_max) / 2 * k.width + u) as usize;
+        t.rgb()[i * 3] < 100
+    });
+    assert!(dark_right.count() > 10, "no shadow to the right of the cube");
+}
+
+#[test]
+fn shadows_are_off_by_default_and_items_before_first_caster_cast_none() {
+    let k = k_small();
+    let plane = quad_mesh(0.6, 0.6, 1.0, grey());
+    let cube = box_mesh([0.05; 3], 1.0, grey());
+    let items = [
+        RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 0 },
+        RenderItem { mesh: &cube, pose: pose([0.0; 3], [-0.05, 0.02, 0.95]), instance_label: 1 },
+    ];
+    assert!(!RenderSettings::default().shadows.enabled);
+    let lighting = one_light([-0.8, 0.25, -0.55], 0.2, 0.8);
+    let render_with = |shadows: ShadowSettings| {
+        // Exposure 1.01 forces the per-pixel mode when shadows are off too.
+        let camera_response = CameraResponse { exposure: 1.0001, ..Default::default() };
+        let s = RenderSettings { lighting: lighting.clone(), shadows, camera_response, ..Default::default() };
+        let mut t = RenderTarget::for_intrinsics(&k);
+        render_scene(&items, &k, &s, &mut t).unwrap();
+        t
+    };
+    let none = render_with(ShadowSettings::default());
+    let cube_not_casting =
+        render_with(ShadowSettings { enabled: true, first_caster: 0, end_caster: 1, ..Default::default() });
+    let all = render_with(ShadowSettings { enabled: true, ..Default::default() });
+    let dark =
+        |t: &RenderTarget| t.rgb().chunks_exact(3).zip(t.labels()).filter(|(c, l)| **l == 0 && c[0] < 100).count();
+    assert_eq!(dark(&none), 0);
+    assert_eq!(dark(&cube_not_casting), 0, "the plane alone must not shadow itself");
+    assert!(dark(&all) > 500);
+}
+
+#[test]
+fn per_pixel_mode_matches_gouraud_on_flat_faces_and_adds_highlights() {
+    let k = k_small();
+    let cube = box_mesh([0.08; 3], 1.0, plain_material("c", [0.4, 0.3, 0.2]));
+    let items = [RenderItem { mesh: &cube, pose: pose([0.4, 0.6, 0.1], [0.0, 0.0, 0.8]), instance_label: 1 }];
+    let lighting = one_light([0.3, -0.7, -0.65], 0.3, 0.7);
+    let gouraud = RenderSettings { lighting: lighting.clone(), ..Default::default() };
+    let mut a = RenderTarget::for_intrinsics(&k);
+    render_scene(&items, &k, &gouraud, &mut a).unwrap();
+    let lit = RenderSettings { item_shading: vec![ItemShading::default()], ..gouraud.clone() };
+    assert!(lit.per_pixel() && !gouraud.per_pixel());
+    let mut b = RenderTarget::for_intrinsics(&k);
+    render_scene(&items, &k, &lit, &mut b).unwrap();
+    let max_diff = a.rgb().iter().zip(b.rgb()).map(|(x, y)| (*x as i32 - *y as i32).abs()).max().unwrap();
+    assert!(max_diff <= 1, "flat faces: Gouraud and per-pixel differ by {max_diff}");
+    assert_eq!(a.depth_u16(), b.depth_u16());
+    assert_eq!(a.labels(), b.labels());
+    assert_eq!(a.reflectance(), b.reflectance());
+
+    // A glossy plane facing the camera, light from behind the camera: the
+    // highlight sits where the normal bisects light and view (the image centre
+    // for a head-on light), and nowhere without specular.
+    let plane = quad_mesh(0.5, 0.5, 1.0, grey());
+    let items =
+        [RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 1 }];
+    let glossy = RenderSettings {
+        lighting: one_light([0.0, 0.0, -1.0], 0.1, 0.5),
+        item_shading: vec![ItemShading { specular: 0.3, shininess: 200.0, ..Default::default() }],
+        ..Default::default()
+    };
+    let mut g = RenderTarget::for_intrinsics(&k);
+    render_scene(&items, &k, &glossy, &mut g).unwrap();
+    let at = |t: &RenderTarget, u: u32, v: u32| t.rgb()[((v * k.width + u) * 3) as usize];
+    let (cu, cv) = (k.cx.round() as u32, k.cy.round() as u32);
+    assert!(at(&g, cu, cv) >= 250, "no highlight at the centre: {}", at(&g, cu, cv));
+    assert!(at(&g, 5, 5) < 200, "highlight spreads to the corner: {}", at(&g, 5, 5));
+    assert!(g.specular()[(cv * k.width + cu) as usize] > 100);
+    assert!(g.specular()[(5 * k.width + 5) as usize] < 50);
+}
+
+#[test]
+fn camera_response_scales_linear_light_and_darkens_corners() {
+    let k = k_small();
+    let plane = quad_mesh(2.0, 2.0, 1.0, grey());
+    let items =
+        [RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 1 }];
+    let base = RenderSettings {
+        lighting: Lighting { ambient: [0.4; 3], lights: vec![], points: vec![] },
+        ..Default::default()
+    };
+    let render_with = |resp: CameraResponse| {
+        let mut t = RenderTarget::for_intrinsics(&k);
+        render_scene(&items, &k, &RenderSettings { camera_response: resp, ..base.clone() }, &mut t).unwrap();
+        t
+    };
+    // Linear 0.5 * 0.4 = 0.2 → sRGB 124; exposure 2 and red gain 1.5 → 0.4 / 0.6 linear.
+    let t = render_with(CameraResponse { exposure: 2.0, white_balance: [1.5, 1.0, 1.0], ..Default::default() });
+    let c = &t.rgb()[((120 * k.width + 160) * 3) as usize..][..3];
+    assert_eq!(c, &[203, 170, 170]);
+    let t = render_with(CameraResponse { vignetting: 0.5, ..Default::default() });
+    let centre = t.rgb()[((121 * k.width + 159) * 3) as usize];
+    let corner = t.rgb()[0];
+    assert!(centre == 124 && corner < 100, "centre {centre}, corner {corner}");
+    let t = render_with(CameraResponse { gamma: 2.0, ..Default::default() });
+    // Encoded 124/255 = 0.486 → 0.486^(1/2) = 0.697 → 178.
+    assert!((t.rgb()[((120 * k.width + 160) * 3) as usize] as i32 - 178).abs() <= 1);
+}
+
+#[test]
+fn colour_jitter_keeps_grey_and_rotates_hue() {
+    let s = ItemShading::default().with_color_jitter(120.0, 1.0, 1.0);
+    let m = s.albedo_transform;
+    let apply = |c: [f32; 3]| -> [f32; 3] { std::array::from_fn(|i| (0..3).map(|j| m[i][j] * c[j]).sum()) };
+    let grey = apply([0.3; 3]);
+    assert!(grey.iter().all(|g| (g - 0.3).abs() < 1e-5), "{grey:?}");
+    // A 120° turn about the grey axis maps red to green.
+    let r = apply([1.0, 0.0, 0.0]);
+    assert!((r[1] - 1.0).abs() < 1e-5 && r[0].abs() < 1e-5 && r[2].abs() < 1e-5, "{r:?}");
+    let half = ItemShading::default().with_color_jitter(0.0, 0.0, 0.5).albedo_transform;
+    let c = (0..3).map(|j| half[0][j] * [0.9, 0.3, 0.0][j]).sum::<f32>();
+    assert!((c - 0.2).abs() < 1e-5, "desaturated at half value: {c}");
+}
+
+#[test]
+fn point_lights_fall_off_with_the_squared_distance() {
+    let k = k_small();
+    let plane = quad_mesh(2.0, 2.0, 1.0, grey());
+    let items =
+        [RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 1 }];
+    let render_at = |z: f64| {
+        let lighting = Lighting {
+            ambient: [0.0; 3],
+            lights: vec![],
+            points: vec![PointLight { position: Point3::new(0.0, 0.0, 1.0 - z), color: [0.4 * (z * z) as f32; 3] }],
+        };
+        let mut t = RenderTarget::for_intrinsics(&k);
+        render_scene(&items, &k, &RenderSettings { lighting, ..Default::default() }, &mut t).unwrap();
+        t.rgb()[((122 * k.width + 159) * 3) as usize]
+    };
+    // Colour scaled by d², so the facing point gets 0.4 · 0.5 = 0.2 linear (124) at any distance.
+    assert_eq!(render_at(0.5), 124);
+    assert_eq!(render_at(0.8), 124);
 }

@@ -1,8 +1,12 @@
 //! Background geometry for sampled scenes: mesh primitives (box, quad), the
-//! procedural textures, and the textured table top plus a room around it.
+//! procedural textures, and the textured table top plus a room around it
+//! (for randomised scenes also a room of random size and a wall close behind
+//! the table).
 //! All in the table frame: origin at the centre of the table top, z up, metres.
 
+use crate::render::Randomize;
 use crate::{Material, Mesh, Texture};
+use nalgebra::Vector3;
 use rand::Rng;
 
 /// An axis-aligned box centred at the origin with half extents `half` (metres):
@@ -103,11 +107,35 @@ pub enum Pattern {
     Tiles,
     /// Smooth mottled paint.
     Mottled,
+    /// A checkerboard of two strong colours (2–8 squares per tile).
+    Checker,
+    /// Straight stripes (possibly diagonal) of two or three strong colours.
+    Stripes,
+    /// Blotchy noise between strongly coloured hues.
+    ColourNoise,
+}
+
+impl Pattern {
+    /// Every pattern.
+    pub const ALL: [Pattern; 6] =
+        [Pattern::Grain, Pattern::Tiles, Pattern::Mottled, Pattern::Checker, Pattern::Stripes, Pattern::ColourNoise];
 }
 
 /// A seamless `size x size` procedural texture with a random base colour.
 pub fn procedural_texture(rng: &mut impl Rng, pattern: Pattern, size: u32) -> Texture {
-    let base = random_colour(rng, (0.35, 0.9), (0.05, 0.55));
+    procedural_texture_with(rng, pattern, size, None)
+}
+
+/// Like [`procedural_texture`], with the base colour (sRGB 0..255) given
+/// instead of drawn when `base` is set.
+pub fn procedural_texture_with(rng: &mut impl Rng, pattern: Pattern, size: u32, base: Option<[f32; 3]>) -> Texture {
+    if matches!(pattern, Pattern::Checker | Pattern::Stripes | Pattern::ColourNoise) {
+        return strong_texture(rng, pattern, size, base);
+    }
+    let base = match base {
+        Some(b) => b,
+        None => random_colour(rng, (0.35, 0.9), (0.05, 0.55)),
+    };
     let accent = random_colour(rng, (0.2, 0.8), (0.05, 0.5));
     let seed: u32 = rng.random();
     let contrast: f32 = rng.random_range(0.1..0.35);
@@ -129,13 +157,57 @@ pub fn procedural_texture(rng: &mut impl Rng, pattern: Pattern, size: u32) -> Te
                     let grout = fu < 0.04 || fv < 0.04;
                     if grout { -1.0 } else { 0.3 + 0.4 * noise(8, u, v) }
                 }
-                Pattern::Mottled => noise(4, u, v) * 0.7 + noise(16, u, v) * 0.3,
+                Pattern::Mottled | Pattern::Checker | Pattern::Stripes | Pattern::ColourNoise => {
+                    noise(4, u, v) * 0.7 + noise(16, u, v) * 0.3
+                }
             };
             let i = (y * n + x) * 3;
             for c in 0..3 {
                 let col =
                     if t < 0.0 { accent[c] * 0.6 } else { base[c] * (1.0 - contrast) + accent[c] * contrast * t * 2.0 };
                 rgb[i + c] = col.round().clamp(0.0, 255.0) as u8;
+            }
+        }
+    }
+    Texture { width: size, height: size, rgb }
+}
+
+/// The strongly coloured patterns: checker, stripes and colour noise.
+fn strong_texture(rng: &mut impl Rng, pattern: Pattern, size: u32, base: Option<[f32; 3]>) -> Texture {
+    let c0 = base.unwrap_or_else(|| random_colour(rng, (0.4, 1.0), (0.5, 1.0)));
+    let c1 = random_colour(rng, (0.1, 1.0), (0.3, 1.0));
+    let c2 = random_colour(rng, (0.3, 1.0), (0.5, 1.0));
+    let seed: u32 = rng.random();
+    let cells = rng.random_range(2..=8u32);
+    // Integer frequencies keep stripes seamless when the texture tiles.
+    let (fu, fv) = (rng.random_range(0..=6i32), rng.random_range(1..=8i32));
+    let three = rng.random_bool(0.4);
+    let n = size as usize;
+    let mut rgb = vec![0u8; n * n * 3];
+    for y in 0..n {
+        for x in 0..n {
+            let (u, v) = (x as f32 / n as f32, y as f32 / n as f32);
+            let col = match pattern {
+                Pattern::Checker => {
+                    let (i, j) = ((u * cells as f32) as u32, (v * cells as f32) as u32);
+                    if (i + j) % 2 == 0 { c0 } else { c1 }
+                }
+                Pattern::Stripes => {
+                    let t = (fu as f32 * u + fv as f32 * v).rem_euclid(1.0);
+                    let k = if three { (t * 3.0) as u32 } else { (t * 2.0) as u32 };
+                    [c0, c1, c2][k.min(2) as usize]
+                }
+                _ => {
+                    let a = value_noise(seed, u * 6.0, v * 6.0, 6);
+                    let b = value_noise(seed ^ 0x9e37, u * 24.0, v * 24.0, 24);
+                    let t = (0.75 * a + 0.25 * b).clamp(0.0, 1.0);
+                    let (lo, hi, s) = if t < 0.5 { (c0, c1, t * 2.0) } else { (c1, c2, t * 2.0 - 1.0) };
+                    std::array::from_fn(|c| lo[c] + (hi[c] - lo[c]) * s)
+                }
+            };
+            let i = (y * n + x) * 3;
+            for c in 0..3 {
+                rgb[i + c] = col[c].round().clamp(0.0, 255.0) as u8;
             }
         }
     }
@@ -149,8 +221,12 @@ pub struct Backdrop {
     pub table: Mesh,
     /// Table top extent: half sizes along x and y (metres).
     pub table_half_extent: [f64; 2],
-    /// Floor and four walls of the room (inward-facing boxes).
+    /// Floor and four walls of the room (inward-facing boxes), plus in some
+    /// randomised scenes a wall right behind the table.
     pub room: Mesh,
+    /// Height of the room's walls above its floor (metres; the floor is
+    /// 0.75 m below the table top).
+    pub room_height_m: f64,
 }
 
 impl Backdrop {
@@ -172,7 +248,68 @@ impl Backdrop {
         let floor_tex = procedural_texture(rng, Pattern::Tiles, 256);
         let wall_tex = procedural_texture(rng, Pattern::Mottled, 128);
         let room = room_mesh(3.0, 0.75, 2.5, floor_tex, wall_tex);
-        Backdrop { table, table_half_extent: [hx as f64, hy as f64], room }
+        Backdrop { table, table_half_extent: [hx as f64, hy as f64], room, room_height_m: 2.5 }
+    }
+
+    /// A randomised backdrop: a table 0.9–1.8 m × 0.7–1.2 m with any pattern,
+    /// a room 4–7 m wide and 2.5–3.2 m high with any patterns on floor and
+    /// walls, and in 50 % (`Strong` 60 %) of scenes a wall 0–0.25 m behind a
+    /// random table edge, up to 1.6 m above the table. Returns the backdrop
+    /// and that wall's plane `(n, d)` (n into the room: inside is `n·p > d`).
+    pub fn random_varied(rng: &mut impl Rng, level: Randomize) -> (Backdrop, Option<(Vector3<f64>, f64)>) {
+        let hx = rng.random_range(0.45..0.9f32);
+        let hy = rng.random_range(0.35..0.6f32);
+        let thickness = 0.03f32;
+        fn any(rng: &mut impl Rng) -> Pattern {
+            Pattern::ALL[rng.random_range(0..Pattern::ALL.len())]
+        }
+        let pattern = any(rng);
+        let table_tex = procedural_texture(rng, pattern, 256);
+        let mut table = box_mesh([hx, hy, thickness / 2.0], 1.0, textured_material("table", table_tex));
+        for p in table.positions.iter_mut() {
+            p[2] -= thickness / 2.0;
+        }
+        let tile = rng.random_range(0.25..0.8f32);
+        for (p, uv) in table.positions.iter().zip(table.uvs.iter_mut()) {
+            *uv = [p[0] / tile + 0.5, p[1] / tile + 0.5];
+        }
+        let pattern = any(rng);
+        let floor_tex = procedural_texture(rng, pattern, 128);
+        let pattern = any(rng);
+        let wall_tex = procedural_texture(rng, pattern, 128);
+        let half = rng.random_range(2.0..3.5f32);
+        let height = rng.random_range(2.5..3.2f32);
+        let mut room = room_mesh(half, 0.75, height, floor_tex, wall_tex);
+        let p_wall = if level == Randomize::Strong { 0.6 } else { 0.5 };
+        let mut plane = None;
+        if rng.random_bool(p_wall) {
+            let side = rng.random_range(0..4u32);
+            let gap = rng.random_range(0.0..0.25f32);
+            let (edge, along) = if side < 2 { (hx + gap, hy) } else { (hy + gap, hx) };
+            let sign = if side % 2 == 0 { 1.0f32 } else { -1.0 };
+            let top = 1.6f32;
+            let w = along + 1.0;
+            // Corners in (along, across) then mapped to xy, wall facing the table.
+            let map = |a: f32, z: f32| if side < 2 { [sign * edge, a, z] } else { [a, sign * edge, z] };
+            let normal = if side < 2 { [-sign, 0.0, 0.0] } else { [0.0, -sign, 0.0] };
+            let pattern = any(rng);
+            let tex = procedural_texture(rng, pattern, 128);
+            let mi = room.materials.len() as u32;
+            room.materials.push(textured_material("near_wall", tex));
+            let base = room.positions.len() as u32;
+            let uv_s = 1.0 / rng.random_range(0.4..1.2f32);
+            for (a, z) in [(-w, -0.75), (w, -0.75), (w, top), (-w, top)] {
+                room.positions.push(map(a, z));
+                room.normals.push(normal);
+                room.uvs.push([a * uv_s, z * uv_s]);
+            }
+            room.triangles.push([base, base + 1, base + 2]);
+            room.triangles.push([base, base + 2, base + 3]);
+            room.triangle_materials.extend([mi, mi]);
+            let n = Vector3::new(normal[0] as f64, normal[1] as f64, normal[2] as f64);
+            plane = Some((n, -(edge as f64)));
+        }
+        (Backdrop { table, table_half_extent: [hx as f64, hy as f64], room, room_height_m: height as f64 }, plane)
     }
 }
 

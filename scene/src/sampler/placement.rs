@@ -20,6 +20,8 @@ pub struct RestPose {
     pub face_area: f64,
     /// True for the face with outward normal −z (the object's natural upright rest).
     pub upright: bool,
+    /// Height of the object's top above the table top in this rest (metres).
+    pub height: f64,
 }
 
 /// The six bounding-box-face rests of a model. Degenerate (empty) meshes get
@@ -35,7 +37,7 @@ pub fn rest_poses(model: &ObjectModel) -> Vec<RestPose> {
                 .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
             let (o1, o2) = ((axis + 1) % 3, (axis + 2) % 3);
             let face_area = (ext[o1] * ext[o2]).abs();
-            let (lift, centre, half) = footprint(model, &rotation);
+            let (lift, centre, half, height) = footprint(model, &rotation);
             out.push(RestPose {
                 rotation,
                 lift,
@@ -43,14 +45,16 @@ pub fn rest_poses(model: &ObjectModel) -> Vec<RestPose> {
                 footprint_half: half,
                 face_area,
                 upright: axis == 2 && sign < 0.0,
+                height,
             });
         }
     }
     out
 }
 
-/// Lift (−min z) and the xy bounding rectangle of the rotated mesh vertices.
-fn footprint(model: &ObjectModel, r: &UnitQuaternion<f64>) -> (f64, [f64; 2], [f64; 2]) {
+/// Lift (−min z), the xy bounding rectangle (centre, half sizes) and the
+/// height (max z − min z) of the rotated mesh vertices.
+fn footprint(model: &ObjectModel, r: &UnitQuaternion<f64>) -> (f64, [f64; 2], [f64; 2], f64) {
     let mut lo = [f64::INFINITY; 3];
     let mut hi = [f64::NEG_INFINITY; 3];
     for p in &model.mesh.positions {
@@ -64,9 +68,14 @@ fn footprint(model: &ObjectModel, r: &UnitQuaternion<f64>) -> (f64, [f64; 2], [f
         }
     }
     if lo[0] > hi[0] {
-        return (0.0, [0.0; 2], [0.0; 2]);
+        return (0.0, [0.0; 2], [0.0; 2], 0.0);
     }
-    (-lo[2], [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0], [(hi[0] - lo[0]) / 2.0, (hi[1] - lo[1]) / 2.0])
+    (
+        -lo[2],
+        [(lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0],
+        [(hi[0] - lo[0]) / 2.0, (hi[1] - lo[1]) / 2.0],
+        hi[2] - lo[2],
+    )
 }
 
 /// An oriented rectangle on the table (metres, table frame).
@@ -120,6 +129,7 @@ mod tests {
             footprint_half: [hx, hy],
             face_area: 0.0,
             upright: true,
+            height: 0.0,
         };
         Footprint::of(&rest, yaw, Vector2::new(cx, cy))
     }

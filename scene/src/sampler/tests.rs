@@ -356,3 +356,348 @@ fn builtin_scenes_rest_render_and_back_project_onto_the_meshes() {
         assert!(mean < 1e-3, "seed {seed}: mean distance {mean} m");
     }
 }
+
+// ---- Randomisation, depth sensors and several instances per class ----
+
+use crate::render::{DepthSensor, Randomize, RenderSettings, render_scene};
+
+fn ideal(k: &Intrinsics, randomize: Randomize) -> ViewOptions {
+    ViewOptions { intrinsics: *k, depth_sensor: DepthSensor::Ideal, randomize }
+}
+
+#[test]
+fn training_scenes_and_frames_are_deterministic() {
+    let set = box_set();
+    let cfg = SamplerConfig { views: 2, ..SamplerConfig::training() };
+    let k = k_quarter();
+    let a = sample_scene(&set, &cfg, 21).unwrap();
+    let b = sample_scene(&set, &cfg, 21).unwrap();
+    let c = sample_scene(&set, &cfg, 22).unwrap();
+    assert_eq!(a.objects, b.objects);
+    assert_eq!(a.views, b.views);
+    assert_eq!(a.lighting, b.lighting);
+    assert_eq!(a.backdrop.room, b.backdrop.room);
+    assert_eq!(a.extras.distractors.len(), b.extras.distractors.len());
+    assert_ne!(a.views, c.views);
+    let (mut ta, mut tb, mut tc) =
+        (RenderTarget::for_intrinsics(&k), RenderTarget::for_intrinsics(&k), RenderTarget::for_intrinsics(&k));
+    for view in 0..2 {
+        let fa = render_view(&a, &set, view, &k, &NoiseConfig::default(), &mut ta).unwrap();
+        let fb = render_view(&b, &set, view, &k, &NoiseConfig::default(), &mut tb).unwrap();
+        assert_eq!(fa, fb);
+        assert_eq!(ta.rgb(), tb.rgb());
+        assert_eq!(ta.depth_u16(), tb.depth_u16());
+        assert_eq!(ta.labels(), tb.labels());
+    }
+    render_view(&c, &set, 0, &k, &NoiseConfig::default(), &mut tc).unwrap();
+    render_view(&a, &set, 0, &k, &NoiseConfig::default(), &mut ta).unwrap();
+    assert_ne!(ta.rgb(), tc.rgb());
+    // Views of one scene get their own appearance (camera, effects).
+    let mut t1 = RenderTarget::for_intrinsics(&k);
+    let f0 = render_view(&a, &set, 0, &k, &NoiseConfig::default(), &mut ta).unwrap();
+    let f1 = render_view(&a, &set, 1, &k, &NoiseConfig::default(), &mut t1).unwrap();
+    assert_ne!(f0.intrinsics, f1.intrinsics);
+}
+
+#[test]
+fn off_and_basic_options_reproduce_render_view() {
+    let set = box_set();
+    let s = sample_scene(&set, &SamplerConfig::default(), 7).unwrap();
+    assert_eq!((s.randomize, s.depth_sensor), (Randomize::Off, DepthSensor::Basic));
+    let k = k_quarter();
+    let (mut a, mut b) = (RenderTarget::for_intrinsics(&k), RenderTarget::for_intrinsics(&k));
+    let fa = render_view(&s, &set, 0, &k, &NoiseConfig::default(), &mut a).unwrap();
+    let opts = ViewOptions { intrinsics: k, depth_sensor: DepthSensor::Basic, randomize: Randomize::Off };
+    assert_eq!(opts, ViewOptions::for_scene(&s, &k));
+    let fb = render_view_with(&s, &set, 0, &opts, &mut b).unwrap();
+    assert_eq!(fa, fb);
+    assert_eq!(a.rgb(), b.rgb());
+    assert_eq!(a.depth_u16(), b.depth_u16());
+    assert_eq!(fa.intrinsics, k, "no jitter without randomisation");
+    // Ideal: exact depth, same picture geometry.
+    let mut c = RenderTarget::for_intrinsics(&k);
+    render_view_with(&s, &set, 0, &ideal(&k, Randomize::Off), &mut c).unwrap();
+    let mut exact = RenderTarget::for_intrinsics(&k);
+    render_view(&s, &set, 0, &k, &NoiseConfig::off(), &mut exact).unwrap();
+    assert_eq!(c.depth_u16(), exact.depth_u16());
+}
+
+#[test]
+fn jittered_intrinsics_are_the_ones_used_and_reported() {
+    let set = box_set();
+    let cfg = SamplerConfig { views: 3, ..SamplerConfig::training() };
+    let k = k_quarter();
+    let mut t = RenderTarget::for_intrinsics(&k);
+    let mut checked = 0;
+    for seed in 0..4 {
+        let s = sample_scene(&set, &cfg, 300 + seed).unwrap();
+        for view in 0..s.views.len() {
+            let truth = render_view_with(&s, &set, view, &ideal(&k, Randomize::Default), &mut t).unwrap();
+            let j = truth.intrinsics;
+            assert_ne!(j, k);
+            assert!((j.fx / k.fx - 1.0).abs() <= 0.05 * 1.0001 && (j.fy / k.fy - 1.0).abs() <= 0.0555);
+            assert!((j.cx - k.cx).abs() <= 10.0 && (j.cy - k.cy).abs() <= 10.0);
+            assert_eq!((j.width, j.height), (k.width, k.height));
+            // Depth back-projected with the reported camera lies on the boxes.
+            for o in &truth.objects {
+                let m = set.by_class(o.class_id).unwrap();
+                let inv = o.pose.inverse();
+                for (i, &l) in t.labels().iter().enumerate() {
+                    if l != o.instance_label || i % 3 != 0 {
+                        continue;
+                    }
+                    let (u, v) = ((i % k.width as usize) as f64, (i / k.width as usize) as f64);
+                    let q = inv * j.back_project(u, v, t.depth_m()[i] as f64);
+                    let outside = (0..3).map(|c| (q[c].abs() - m.bbox_max[c]).max(0.0)).fold(0.0, f64::max);
+                    assert!(outside < 2e-4, "pixel ({u},{v}) is {outside} m off its box");
+                    checked += 1;
+                }
+            }
+        }
+    }
+    assert!(checked > 500);
+}
+
+#[test]
+fn distractors_are_background_and_never_in_the_truth() {
+    let set = box_set();
+    let cfg = SamplerConfig { views: 2, ..SamplerConfig::training() };
+    let k = k_quarter();
+    let mut t = RenderTarget::for_intrinsics(&k);
+    let mut probe = RenderTarget::for_intrinsics(&k);
+    let (mut distractor_px, mut scenes_with) = (0, 0);
+    for seed in 0..8 {
+        let s = sample_scene(&set, &cfg, 500 + seed).unwrap();
+        scenes_with += usize::from(!s.extras.distractors.is_empty());
+        for view in 0..s.views.len() {
+            let truth = render_view_with(&s, &set, view, &ideal(&k, Randomize::Default), &mut t).unwrap();
+            assert_eq!(truth.objects.len(), s.objects.len());
+            let labelled = t.labels().iter().filter(|&&l| l != 0).count() as u32;
+            assert_eq!(labelled, truth.objects.iter().map(|o| o.visible_pixels).sum::<u32>());
+            assert!(t.labels().iter().all(|&l| l as usize <= s.objects.len()));
+            // Where a distractor is the nearest surface, the label is 0.
+            let mut items = s.render_items(&set, view).unwrap();
+            let first = 2 + s.objects.len();
+            for item in items[first..].iter_mut() {
+                item.instance_label = 999;
+            }
+            render_scene(&items, &truth.intrinsics, &RenderSettings::default(), &mut probe).unwrap();
+            for (i, &l) in probe.labels().iter().enumerate() {
+                if l == 999 && t.depth_m()[i] == probe.depth_m()[i] {
+                    assert_eq!(t.labels()[i], 0, "distractor pixel labelled");
+                    distractor_px += 1;
+                }
+            }
+        }
+    }
+    assert!(scenes_with >= 4, "distractors in only {scenes_with} of 8 scenes");
+    assert!(distractor_px > 200, "distractors visible in only {distractor_px} pixels");
+}
+
+#[test]
+fn border_occluders_stay_near_the_edge_and_in_front() {
+    let set = box_set();
+    let s = sample_scene(&set, &SamplerConfig::training(), 77).unwrap();
+    let k = k_quarter();
+    let cam = s.views[0].camera_from_table;
+    let mut rng = Pcg64Mcg::seed_from_u64(3);
+    let centroid = s.objects.iter().fold(Vector3::zeros(), |a, o| a + o.table_from_object.translation.vector)
+        / s.objects.len() as f64;
+    let scene_z = (cam * Point3::from(centroid)).z;
+    let mut placed = 0;
+    for i in 0..40 {
+        let mesh = &s.extras.occluders[i % s.extras.occluders.len()];
+        let Some(pose) = distractors::border_occluder_pose(&mut rng, &s, &set, mesh, &k, &cam) else {
+            continue;
+        };
+        placed += 1;
+        let c = Point3::from(pose.translation.vector);
+        let r = mesh.positions.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).fold(0.0f32, f32::max);
+        assert!(c.z + r as f64 <= 0.7 * scene_z + 1e-9 && c.z - r as f64 >= 0.05 - 1e-9, "occluder at {} m", c.z);
+        let (u, v) = k.project(&c).unwrap();
+        // Signed distance of the centre to the nearest border (negative outside).
+        let border = u.min(k.width as f64 - 1.0 - u).min(v).min(k.height as f64 - 1.0 - v);
+        let rho = k.fx * r as f64 / c.z;
+        // It reaches 5–30 % into the image from that border.
+        let reach = border + rho;
+        assert!(reach >= 0.04 * k.height as f64 && reach <= 0.31 * k.width as f64, "reach {reach} px");
+    }
+    assert!(placed > 30, "placed {placed} of 40");
+}
+
+#[test]
+fn copies_of_a_class_get_their_own_labels_and_touch_in_pairs_and_heaps() {
+    let set = box_set();
+    let cfg = SamplerConfig {
+        min_objects: 2,
+        max_objects: 3,
+        instances_per_class: (1, 2),
+        pair_probability: 1.0,
+        heap_probability: 1.0,
+        ..SamplerConfig::default()
+    };
+    let k = k_quarter();
+    let mut t = RenderTarget::for_intrinsics(&k);
+    let (mut heaps, mut stacked, mut pairs) = (0, 0, 0);
+    for seed in 0..12 {
+        let s = sample_scene(&set, &cfg, 40 + seed).unwrap();
+        for (i, o) in s.objects.iter().enumerate() {
+            assert_eq!(o.instance_label as usize, i + 1);
+        }
+        // Group copies by class.
+        let mut by_class: std::collections::BTreeMap<u16, Vec<&PlacedObject>> = Default::default();
+        for o in &s.objects {
+            by_class.entry(o.class_id).or_default().push(o);
+        }
+        let corners = |o: &PlacedObject| -> Vec<Point3<f64>> {
+            let m = set.by_class(o.class_id).unwrap();
+            (0..8)
+                .map(|c| {
+                    o.table_from_object
+                        * Point3::new(
+                            if c & 1 == 0 { m.bbox_min.x } else { m.bbox_max.x },
+                            if c & 2 == 0 { m.bbox_min.y } else { m.bbox_max.y },
+                            if c & 4 == 0 { m.bbox_min.z } else { m.bbox_max.z },
+                        )
+                })
+                .collect()
+        };
+        // No box corner inside another box (exact for boxes, all layers).
+        for a in &s.objects {
+            for b in &s.objects {
+                if a.instance_label == b.instance_label {
+                    continue;
+                }
+                let mb = set.by_class(b.class_id).unwrap();
+                let inv = b.table_from_object.inverse();
+                for p in corners(a) {
+                    let q = inv * p;
+                    assert!(!(0..3).all(|c| q[c].abs() < mb.bbox_max[c] - 1e-6), "seed {seed}: copies interpenetrate");
+                }
+                // Nothing floats below the table.
+                assert!(corners(a).iter().all(|p| p.z > -1e-6));
+            }
+        }
+        // Heaps: every copy lies within 0.5 mm (footprint gap) of another copy.
+        for copies in by_class.values() {
+            if copies.len() >= 4 {
+                heaps += 1;
+                stacked += copies
+                    .iter()
+                    .filter(|o| corners(o).iter().map(|p| p.z).fold(f64::INFINITY, f64::min) > 1e-4)
+                    .count();
+            }
+            if copies.len() == 2 {
+                pairs += 1;
+            }
+        }
+        let truth = render_view_with(&s, &set, 0, &ideal(&k, Randomize::Off), &mut t).unwrap();
+        assert_eq!(truth.objects.len(), s.objects.len());
+        for o in &truth.objects {
+            let count = t.labels().iter().filter(|&&l| l == o.instance_label).count() as u32;
+            assert_eq!(count, o.visible_pixels);
+        }
+        let distinct: std::collections::BTreeSet<u16> = t.labels().iter().copied().filter(|&l| l != 0).collect();
+        assert!(distinct.len() >= 3, "seed {seed}: only {} instances visible", distinct.len());
+    }
+    assert!(heaps >= 10, "{heaps} heaps");
+    assert!(stacked >= 3, "{stacked} copies lying on top of others");
+    assert!(pairs >= 6, "{pairs} pairs");
+}
+
+#[test]
+fn pair_and_heap_copies_touch() {
+    let set = box_set();
+    let rests: Vec<Vec<placement::RestPose>> = set.objects.iter().map(placement::rest_poses).collect();
+    let cfg = SamplerConfig { min_objects: 1, max_objects: 1, pair_probability: 1.0, ..SamplerConfig::default() };
+    let footprint = |o: &PlacedObject| {
+        let m = set.by_class(o.class_id).unwrap();
+        let rest = rests[o.class_id as usize - 1].iter().find(|r| {
+            let q = o.table_from_object.rotation * r.rotation.inverse();
+            // The rest whose rotation differs from the pose by a yaw only.
+            (q * nalgebra::Vector3::z() - nalgebra::Vector3::z()).norm() < 1e-6
+        });
+        let _ = m;
+        let rest = rest.unwrap();
+        let q = o.table_from_object.rotation * rest.rotation.inverse();
+        let yaw = q.euler_angles().2;
+        placement::Footprint::of(rest, yaw, o.table_from_object.translation.vector.xy())
+    };
+    for seed in 0..10 {
+        let s = sample_scene(&set, &cfg, 900 + seed).unwrap();
+        assert_eq!(s.objects.len(), 2, "seed {seed}: a pair is two copies");
+        let (a, b) = (footprint(&s.objects[0]), footprint(&s.objects[1]));
+        assert!(!a.overlaps(&b, 0.0), "seed {seed}: pair overlaps");
+        assert!(a.overlaps(&b, 0.0031), "seed {seed}: pair more than 3 mm apart");
+    }
+    let heap = SamplerConfig { min_objects: 1, max_objects: 1, heap_probability: 1.0, ..SamplerConfig::default() };
+    for seed in 0..10 {
+        let s = sample_scene(&set, &heap, 950 + seed).unwrap();
+        assert!((4..=8).contains(&s.objects.len()), "seed {seed}: heap of {}", s.objects.len());
+        let base: Vec<placement::Footprint> = s
+            .objects
+            .iter()
+            .filter(|o| {
+                let m = set.by_class(o.class_id).unwrap();
+                let lowest = (0..8)
+                    .map(|c| {
+                        (o.table_from_object
+                            * Point3::new(
+                                if c & 1 == 0 { m.bbox_min.x } else { m.bbox_max.x },
+                                if c & 2 == 0 { m.bbox_min.y } else { m.bbox_max.y },
+                                if c & 4 == 0 { m.bbox_min.z } else { m.bbox_max.z },
+                            ))
+                        .z
+                    })
+                    .fold(f64::INFINITY, f64::min);
+                lowest.abs() < 1e-6
+            })
+            .map(footprint)
+            .collect();
+        assert!(base.len() >= 2);
+        for (i, a) in base.iter().enumerate() {
+            let touching = base.iter().enumerate().any(|(j, b)| i != j && a.overlaps(b, 0.0005));
+            assert!(touching, "seed {seed}: heap copy {i} touches no other copy");
+        }
+    }
+}
+
+#[test]
+fn training_cameras_span_grazing_to_top_down_and_cut_objects_at_edges() {
+    let set = box_set();
+    let cfg = SamplerConfig { views: 4, ..SamplerConfig::training() };
+    let k = cfg.intrinsics;
+    let (mut grazing, mut top_down, mut near, mut far, mut cut, mut frames) = (0, 0, 0, 0, 0, 0);
+    for seed in 0..30 {
+        let s = sample_scene(&set, &cfg, 1200 + seed).unwrap();
+        let centroid = s.objects.iter().fold(Vector3::zeros(), |a, o| a + o.table_from_object.translation.vector)
+            / s.objects.len() as f64;
+        for v in &s.views {
+            frames += 1;
+            let eye = v.camera_from_table.inverse() * Point3::origin();
+            let d = eye - Point3::new(centroid.x, centroid.y, 0.05);
+            let elev = (d.z / d.norm()).asin().to_degrees();
+            assert!(d.norm() < 1.5 + 0.2 && d.norm() > 0.3 - 0.15, "distance {}", d.norm());
+            grazing += usize::from(elev < 15.0);
+            top_down += usize::from(elev > 80.0);
+            near += usize::from(d.norm() < 0.5);
+            far += usize::from(d.norm() > 1.2);
+            // Cameras keep clear of the objects.
+            for o in &s.objects {
+                let m = set.by_class(o.class_id).unwrap();
+                assert!((eye - Point3::from(o.table_from_object.translation.vector)).norm() > 0.5 * m.diameter);
+            }
+            let poses: Vec<Pose> = s.objects.iter().map(|o| v.camera_from_table * o.table_from_object).collect();
+            let at_edge = poses.iter().any(|p| {
+                let c = Point3::from(p.translation.vector);
+                k.project(&c).is_some_and(|(u, v)| {
+                    u.min(k.width as f64 - u).min(v).min(k.height as f64 - v) < 0.1 * k.width as f64
+                })
+            });
+            cut += usize::from(at_edge);
+        }
+    }
+    assert!(grazing > 3 && top_down > 3, "grazing {grazing}, top-down {top_down} of {frames}");
+    assert!(near > 3 && far > 3, "near {near}, far {far}");
+    assert!(cut * 5 > frames, "objects at the image edge in only {cut} of {frames} views");
+}

@@ -35,7 +35,7 @@ fn main() -> anyhow::Result<()> {
             header.sequence = sequence;
             header.capture_time_ns = fusepose_client::monotonic_ns();
             (header.fx, header.fy, header.cx, header.cy) = (525.0, 525.0, 319.5, 239.5);
-            header.depth = PlaneRef { offset: layout.payload_len() as u64 - 100, len: header.depth.len };
+            header.depth = PlaneRef { offset: layout.payload_len() as u32 - 100, len: header.depth.len };
             let payload = vec![0u8; layout.payload_len()];
             producer.send_raw(header, &payload)?;
             producer.set_next_sequence(sequence + 1);

@@ -1,8 +1,10 @@
 //! Segmentation samples rendered on the fly: a tabletop scene from
-//! `scene::sampler`, rendered with sensor noise and a class label map, turned
+//! `scene::sampler`, rendered with sensor noise and an instance label map, turned
 //! into the network input by the engine's own [`FrameMap`] (so training and
 //! inference see identical inputs), with the class at each output cell's
-//! centre as the target. Training augmentation: per-channel colour gain and
+//! centre as the target and, for the centre-offset head, the offset from each
+//! object cell to the centroid of its instance's visible pixels (cell units /
+//! [`OFFSET_UNIT_CELLS`]). Training augmentation: per-channel colour gain and
 //! bias plus a global brightness shift on the normalised colour, and a
 //! horizontal flip of the full-resolution frame (input and target stay
 //! aligned). A background thread fills a bounded channel.
@@ -13,6 +15,7 @@ use std::thread::JoinHandle;
 
 use anyhow::Context;
 use crossbeam::channel::{Receiver, bounded};
+use fusepose_estimator::seg::config::OFFSET_UNIT_CELLS;
 use fusepose_estimator::seg::{FrameMap, SegConfig};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
@@ -28,20 +31,94 @@ pub struct SegSample {
     pub input: Vec<f32>,
     /// `[H1 * W1]` class id per output cell (0 = background).
     pub target: Vec<u16>,
+    /// `[2, H1 * W1]` offset (x, y) of each object cell to its instance's
+    /// centre, in units of [`OFFSET_UNIT_CELLS`] cells; 0 on background.
+    pub offsets: Vec<f32>,
+    /// `[H1 * W1]` 1 where `offsets` is a target (object cells), else 0.
+    pub offset_mask: Vec<f32>,
 }
 
 /// Renders scene `seed` (class labels, sensor noise) into `target`; `None` when
 /// the sampler could not place the objects (the seed is skipped).
 pub fn render_frame(set: &ObjectSet, seed: u64, target: &mut RenderTarget) -> anyhow::Result<Option<Intrinsics>> {
+    Ok(render_with(set, &SamplerConfig::default(), seed, LabelKind::Class, target)?.map(|(k, _)| k))
+}
+
+/// The camera training frames are rendered with: the target camera
+/// (YCB-Video) at half resolution when the scenes are randomised. The network
+/// sees a 160x120 box filter of the frame either way, and a randomised frame
+/// costs four times less to render at 320x240 (rendering, not the network,
+/// bounds the segmenter's training speed on two cores). Plain scenes keep the
+/// full resolution of the runs before randomisation.
+pub fn render_camera(sampler: &SamplerConfig) -> Intrinsics {
     let k = Intrinsics::YCB_VIDEO;
-    let scene = match sample_scene(set, &SamplerConfig::default(), seed) {
+    if !sampler.randomize.is_on() {
+        return k;
+    }
+    Intrinsics {
+        fx: k.fx * 0.5,
+        fy: k.fy * 0.5,
+        cx: (k.cx + 0.5) * 0.5 - 0.5,
+        cy: (k.cy + 0.5) * 0.5 - 0.5,
+        width: k.width / 2,
+        height: k.height / 2,
+    }
+}
+
+/// Renders scene `seed` drawn with `sampler` into `target` with labels of
+/// `kind`; also returns the instance → class table (index 0 = background).
+pub fn render_with(
+    set: &ObjectSet,
+    sampler: &SamplerConfig,
+    seed: u64,
+    kind: LabelKind,
+    target: &mut RenderTarget,
+) -> anyhow::Result<Option<(Intrinsics, Vec<u16>)>> {
+    let k = render_camera(sampler);
+    let scene = match sample_scene(set, sampler, seed) {
         Ok(s) => s,
         Err(SamplerError::Placement { .. }) => return Ok(None),
         Err(e) => return Err(e).context("sampling a scene"),
     };
-    render_view_labelled(&scene, set, 0, &k, &NoiseConfig::default(), LabelKind::Class, target)
-        .context("rendering a scene")?;
-    Ok(Some(k))
+    let truth =
+        render_view_labelled(&scene, set, 0, &k, &NoiseConfig::default(), kind, target).context("rendering a scene")?;
+    Ok(Some((truth.intrinsics, truth.class_lut())))
+}
+
+/// Class target and centre-offset target of every output cell from a frame's
+/// instance labels (`instance_at(pixel index)`) and its instance → class table.
+fn cell_targets(map: &FrameMap, labels: &[u16], lut: &[u16], cells: &mut [u16]) -> (Vec<f32>, Vec<f32>) {
+    let (w, h) = map.frame_size();
+    let (gw, gh) = map.grid_size();
+    // Visible-pixel centroid of every instance, in cell coordinates (cell centres at integers).
+    let mut sum = vec![[0.0f64; 3]; lut.len()];
+    for (p, &l) in labels.iter().enumerate().take(w * h) {
+        if l == 0 || l as usize >= lut.len() {
+            continue;
+        }
+        let (u, v) = ((p % w) as f64, (p / w) as f64);
+        let s = &mut sum[l as usize];
+        s[0] += (u + 0.5) * gw as f64 / w as f64 - 0.5;
+        s[1] += (v + 0.5) * gh as f64 / h as f64 - 0.5;
+        s[2] += 1.0;
+    }
+    let mut ids = vec![0u16; cells.len()];
+    map.target(|i| labels.get(i).copied().unwrap_or(0), &mut ids);
+    let n = cells.len();
+    let (mut off, mut mask) = (vec![0.0f32; 2 * n], vec![0.0f32; n]);
+    for (i, (&id, cell)) in ids.iter().zip(cells.iter_mut()).enumerate() {
+        let class = lut.get(id as usize).copied().unwrap_or(0);
+        *cell = class;
+        if class == 0 || sum[id as usize][2] == 0.0 {
+            continue;
+        }
+        let s = sum[id as usize];
+        let (cx, cy) = (s[0] / s[2], s[1] / s[2]);
+        off[i] = ((cx - (i % gw) as f64) / OFFSET_UNIT_CELLS as f64) as f32;
+        off[n + i] = ((cy - (i / gw) as f64) / OFFSET_UNIT_CELLS as f64) as f32;
+        mask[i] = 1.0;
+    }
+    (off, mask)
 }
 
 /// A rendered frame (in `target`) as a borrowed view without labels.
@@ -59,17 +136,20 @@ pub fn frame_view(k: Intrinsics, target: &RenderTarget) -> FrameView<'_> {
 pub fn frame_sample(
     set: &ObjectSet,
     cfg: &SegConfig,
+    sampler: &SamplerConfig,
     seed: u64,
     augment: bool,
     target: &mut RenderTarget,
 ) -> anyhow::Result<Option<SegSample>> {
-    let Some(k) = render_frame(set, seed, target)? else { return Ok(None) };
+    let Some((k, lut)) = render_with(set, sampler, seed, LabelKind::Instance, target)? else {
+        return Ok(None);
+    };
     let mut rng = Pcg64::seed_from_u64(seed ^ 0xa46_5e9);
     let (w, h) = (k.width as usize, k.height as usize);
     let map = FrameMap::new(w, h, cfg);
     let mut input = vec![0.0; map.input_len()];
     let mut cells = vec![0u16; map.cells()];
-    if augment && rng.random_bool(0.5) {
+    let (offsets, offset_mask) = if augment && rng.random_bool(0.5) {
         // Horizontal flip of the full-resolution frame, so input and target stay aligned exactly.
         let mut color = target.rgb().to_vec();
         let mut depth = target.depth_m().to_vec();
@@ -84,13 +164,12 @@ pub fn frame_sample(
         labels.chunks_exact_mut(w).for_each(<[u16]>::reverse);
         let frame = FrameView { color: &color, depth: DepthPlane::F32(&depth), ..frame_view(k, target) };
         map.fill_input(&frame, &mut input);
-        map.target(|i| labels.get(i).copied().unwrap_or(0), &mut cells);
+        cell_targets(&map, &labels, &lut, &mut cells)
     } else {
         map.fill_input(&frame_view(k, target), &mut input);
-        let labels = target.labels();
-        map.target(|i| labels.get(i).copied().unwrap_or(0), &mut cells);
-    }
-    let mut s = SegSample { input, target: cells };
+        cell_targets(&map, target.labels(), &lut, &mut cells)
+    };
+    let mut s = SegSample { input, target: cells, offsets, offset_mask };
     if augment {
         jitter_colour(&mut s, cfg, &mut rng);
     }
@@ -120,17 +199,23 @@ pub struct SegStream {
 
 impl SegStream {
     /// Renders scenes `first_seed, first_seed + 1, …` (augmented) until dropped.
-    pub fn spawn(set: Arc<ObjectSet>, cfg: SegConfig, first_seed: u64, capacity: usize) -> anyhow::Result<Self> {
+    pub fn spawn(
+        set: Arc<ObjectSet>,
+        cfg: SegConfig,
+        sampler: SamplerConfig,
+        first_seed: u64,
+        capacity: usize,
+    ) -> anyhow::Result<Self> {
         let (tx, rx) = bounded(capacity);
         let stop = Arc::new(AtomicBool::new(false));
         let stop2 = stop.clone();
         let handle = std::thread::Builder::new()
             .name("fusepose-seg-data".into())
             .spawn(move || -> anyhow::Result<()> {
-                let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
+                let mut target = RenderTarget::for_intrinsics(&render_camera(&sampler));
                 let mut seed = first_seed;
                 while !stop2.load(Ordering::Relaxed) {
-                    if let Some(s) = frame_sample(&set, &cfg, seed, true, &mut target)?
+                    if let Some(s) = frame_sample(&set, &cfg, &sampler, seed, true, &mut target)?
                         && tx.send(s).is_err()
                     {
                         return Ok(());

@@ -35,6 +35,18 @@ pub fn weighted_cross_entropy(logits: Tensor<4>, target: &[u16], weights: &[f32]
     (picked * pw).sum().mul_scalar(-1.0 / norm)
 }
 
+/// Centre-offset regression: mean L1 distance between predicted and target
+/// offsets over the cells that belong to an object (`mask` 1, else 0).
+/// `pred [B, 2, H, W]`; `target` and `mask` in the same layout (`B*2*H*W`, `B*H*W`).
+pub fn offset_l1(pred: Tensor<4>, target: &[f32], mask: &[f32]) -> Tensor<1> {
+    let [b, _, h, w] = pred.dims();
+    let device = pred.device();
+    let t = Tensor::<4>::from_data(TensorData::new(target.to_vec(), [b, 2, h, w]), &device);
+    let m = Tensor::<4>::from_data(TensorData::new(mask.to_vec(), [b, 1, h, w]), &device);
+    let norm = mask.iter().sum::<f32>().max(1.0) * 2.0;
+    ((pred - t).abs() * m).sum().mul_scalar(1.0 / norm)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -59,5 +71,15 @@ mod tests {
         // cell 0: target 1, p = 3/4, weight 3; cell 1: target 0, p = 1/2, weight 1.
         let expect = -(3.0 * (0.75f32).ln() + (0.5f32).ln()) / 4.0;
         assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
+    }
+
+    #[test]
+    fn offset_loss_counts_object_cells_only() {
+        let device = Device::flex();
+        // 1x2 cells; cell 0 is an object (errors 0.5 and 1.0), cell 1 background (error ignored).
+        let p = Tensor::<4>::from_data(TensorData::new(vec![0.5f32, 9.0, -1.0, 9.0], [1, 2, 1, 2]), &device);
+        let loss = offset_l1(p, &[0.0, 0.0, 0.0, 0.0], &[1.0, 0.0]);
+        let v = loss.into_data().try_to_vec::<f32>().unwrap()[0];
+        assert!((v - 0.75).abs() < 1e-6, "{v}");
     }
 }

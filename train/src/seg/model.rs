@@ -20,7 +20,8 @@ fn conv(i: usize, o: usize, k: usize, stride: usize, device: &Device) -> Conv2d 
         .init(device)
 }
 
-/// Encoder `e1..e4` (stride 2), decoder `d3, d2, d1` over `cat(up(prev), skip)`, 1x1 `head`.
+/// Encoder `e1..e4` (stride 2), decoder `d3, d2, d1` over `cat(up(prev), skip)`, 1x1 `head`,
+/// and the optional 1x1 centre-offset head `offset` ([`SegConfig::offsets`]).
 #[derive(Module, Debug)]
 pub struct SegNet {
     pub e1: Conv2d,
@@ -31,6 +32,7 @@ pub struct SegNet {
     pub d2: Conv2d,
     pub d1: Conv2d,
     pub head: Conv2d,
+    pub offset: Option<Conv2d>,
 }
 
 fn up(x: Tensor<4>, like: &Tensor<4>) -> Tensor<4> {
@@ -40,13 +42,37 @@ fn up(x: Tensor<4>, like: &Tensor<4>) -> Tensor<4> {
 
 impl SegNet {
     pub fn new(c: &SegConfig, device: &Device) -> Self {
-        let mut layers = c.layers().into_iter().map(|(_, i, o, k, s)| conv(i, o, k, s, device));
+        let mut layers = c.layers().into_iter().take(8).map(|(_, i, o, k, s)| conv(i, o, k, s, device));
         let mut next = || layers.next().expect("SegConfig::layers has eight layers");
-        Self { e1: next(), e2: next(), e3: next(), e4: next(), d3: next(), d2: next(), d1: next(), head: next() }
+        Self {
+            e1: next(),
+            e2: next(),
+            e3: next(),
+            e4: next(),
+            d3: next(),
+            d2: next(),
+            d1: next(),
+            head: next(),
+            offset: c.offsets.then(|| offset_head(c, device)),
+        }
+    }
+
+    /// Adds a freshly initialised offset head to a network loaded without one
+    /// (resuming a file written before the head existed).
+    pub fn with_offset_head(mut self, c: &SegConfig, device: &Device) -> Self {
+        if self.offset.is_none() {
+            self.offset = Some(offset_head(c, device));
+        }
+        self
     }
 
     /// `x [B, 4, H0, W0]` → logits `[B, K+1, H1, W1]` (half resolution).
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
+        self.forward_all(x).0
+    }
+
+    /// Logits and, with the offset head, centre offsets `[B, 2, H1, W1]`.
+    pub fn forward_all(&self, x: Tensor<4>) -> (Tensor<4>, Option<Tensor<4>>) {
         let e1 = relu(self.e1.forward(x));
         let e2 = relu(self.e2.forward(e1.clone()));
         let e3 = relu(self.e3.forward(e2.clone()));
@@ -54,6 +80,14 @@ impl SegNet {
         let d3 = relu(self.d3.forward(Tensor::cat(vec![up(e4, &e3), e3], 1)));
         let d2 = relu(self.d2.forward(Tensor::cat(vec![up(d3, &e2), e2], 1)));
         let d1 = relu(self.d1.forward(Tensor::cat(vec![up(d2, &e1), e1], 1)));
-        self.head.forward(d1)
+        let offsets = self.offset.as_ref().map(|o| o.forward(d1.clone()));
+        (self.head.forward(d1), offsets)
     }
+}
+
+/// The offset head starts at zero (every cell votes for itself), so a head
+/// added to a trained segmenter does not disturb its features with large
+/// random gradients at the start.
+fn offset_head(c: &SegConfig, device: &Device) -> Conv2d {
+    Conv2dConfig::new([c.dec[2], 2], [1, 1]).with_initializer(burn::nn::Initializer::Zeros).init(device)
 }

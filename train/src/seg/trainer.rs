@@ -22,7 +22,7 @@ use fusepose_scene::ObjectSet;
 use fusepose_scene::builtin::builtin_objects;
 
 use super::data::{SegSample, SegStream};
-use super::loss::{class_weights, weighted_cross_entropy};
+use super::loss::{class_weights, offset_l1, weighted_cross_entropy};
 use super::model::SegNet;
 use super::store;
 use super::validate::{self, SegValidation};
@@ -62,6 +62,12 @@ pub struct SegTrainConfig {
     pub log: Option<PathBuf>,
     /// Show an `indicatif` progress bar.
     pub progress: bool,
+    /// Train the centre-offset head (added to a resumed file that lacks it).
+    pub offsets: bool,
+    /// Weight of the offset loss beside the cross-entropy.
+    pub offset_weight: f64,
+    /// How training scenes are drawn (validation uses the plain default scenes).
+    pub sampler: fusepose_scene::sampler::SamplerConfig,
 }
 
 impl Default for SegTrainConfig {
@@ -84,6 +90,9 @@ impl Default for SegTrainConfig {
             val_frames: 32,
             log: None,
             progress: true,
+            offsets: true,
+            offset_weight: 1.0,
+            sampler: fusepose_scene::sampler::SamplerConfig::training(),
         }
     }
 }
@@ -125,7 +134,16 @@ fn hyper_json(cfg: &SegTrainConfig, weights: &[f32]) -> serde_json::Value {
         "class_weight_max_ratio": cfg.class_weight_max_ratio,
         "class_weights": weights,
         "augment": "colour gain 0.8-1.2, bias +-0.15, brightness +-0.3; horizontal flip 0.5",
-        "data": "builtin scene sampler, YCB-Video intrinsics, sensor noise, rendered on the fly",
+        "offsets": cfg.offsets,
+        "offset_weight": cfg.offset_weight,
+        "data": format!(
+            "scene sampler (randomize {}, depth sensor {}, copies per class {:?}, pairs {}, heaps {}), rendered on the fly",
+            cfg.sampler.randomize,
+            cfg.sampler.depth_sensor,
+            cfg.sampler.instances_per_class,
+            cfg.sampler.pair_probability,
+            cfg.sampler.heap_probability
+        ),
         "optimizer": "adam, cosine decay to 0.1 x lr",
     })
 }
@@ -186,10 +204,18 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
                 .and_then(|h| serde_json::from_str::<serde_json::Value>(h).ok())
                 .and_then(|h| serde_json::from_value::<Vec<f32>>(h["class_weights"].clone()).ok())
                 .filter(|w| w.len() == loaded.file.config.outputs());
-            (loaded.net, loaded.file.config.clone(), record)
+            let mut arch = loaded.file.config.clone();
+            let mut net = loaded.net;
+            // A run that trains (not `--steps 0`, which only re-validates or embeds) adds the head.
+            if cfg.offsets && !arch.offsets && cfg.steps.is_none_or(|s| s > record.steps) {
+                arch.offsets = true;
+                net = net.with_offset_head(&arch, &device);
+            }
+            (net, arch, record)
         }
         None => {
-            let arch = cfg.arch.clone().unwrap_or_else(|| SegConfig::new(set.len()));
+            let mut arch = cfg.arch.clone().unwrap_or_else(|| SegConfig::new(set.len()));
+            arch.offsets = cfg.offsets;
             arch.validate().map_err(|m| anyhow::anyhow!("architecture: {m}"))?;
             if arch.num_classes != set.len() {
                 bail!("architecture has {} classes, the object set {}", arch.num_classes, set.len());
@@ -213,7 +239,7 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
 
     // Training scenes: far from the pose trainer's and the validation seeds; a resume continues.
     let first_seed = 0x5e90_0000_0000 + (cfg.seed % 1000) * 1_000_000_000 + record.samples + 1;
-    let mut stream = SegStream::spawn(set.clone(), arch.clone(), first_seed, 4 * cfg.batch)?;
+    let mut stream = SegStream::spawn(set.clone(), arch.clone(), cfg.sampler.clone(), first_seed, 4 * cfg.batch)?;
 
     // Class weights from the first frames (those frames are trained on too).
     let mut pending: Vec<SegSample> = Vec::new();
@@ -281,7 +307,13 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
             &device,
         );
         let target: Vec<u16> = batch.iter().flat_map(|s| s.target.iter().copied()).collect();
-        let loss = weighted_cross_entropy(net.forward(input), &target, &weights);
+        let (logits, offsets) = net.forward_all(input);
+        let mut loss = weighted_cross_entropy(logits, &target, &weights);
+        if let Some(pred) = offsets {
+            let t: Vec<f32> = batch.iter().flat_map(|s| s.offsets.iter().copied()).collect();
+            let m: Vec<f32> = batch.iter().flat_map(|s| s.offset_mask.iter().copied()).collect();
+            loss = loss + offset_l1(pred, &t, &m).mul_scalar(cfg.offset_weight);
+        }
         let lv = loss.clone().into_data().try_to_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN)
             as f64;
         if !lv.is_finite() {

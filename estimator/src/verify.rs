@@ -1,0 +1,399 @@
+//! Pose verification against the depth image: does the object, placed at its
+//! estimated pose, explain what the camera measured?
+//!
+//! The object's surface samples are projected at the estimated pose and each
+//! is compared with the measured depth at its pixel: a measured surface
+//! behind the sample means the camera sees through where the object should
+//! be (an outlier); one in front is the object's own hidden side or an
+//! occluder (no evidence either way); agreement within a tolerance that grows
+//! with depth is an inlier. The coverage is the share of the instance mask
+//! (on a coarse grid over the mask's and the model's boxes) with an inlier
+//! nearby — a pose behind the measured surface explains nothing — and the
+//! model's front surface (nearest sample per cell) must not lie behind the
+//! measured surface inside the mask. A pose passes with enough of each;
+//! `fit = inlier fraction × coverage × (1 − behind fraction)` is the score
+//! published with it. A pose shifted off its object, or an
+//! object pose made up for a patch of table, fails: the table is a plane
+//! where the model has a shape, and it lies behind the model where the model
+//! overhangs the patch.
+//!
+//! Buffers are sized at construction; [`Verifier::verify`] does not allocate.
+
+use fusepose_scene::ObjectSet;
+
+use crate::frame::FrameView;
+use crate::poses::ObjectPose;
+
+/// Thresholds of the check. Defaults chosen on the tuning split (`fusepose render
+/// --split test --seed 7`; never the test split): they drop 1.7 % of the poses
+/// under 2 cm ADD-S and 44 % of the ghost poses there (docs/BENCHMARKS.md).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct VerifyConfig {
+    /// Grid cells along each side of the window.
+    pub grid: usize,
+    /// Depth agreement tolerance `base + per_metre · z` (metres): measured and
+    /// model depth within it agree.
+    pub tolerance_base_m: f32,
+    pub tolerance_per_m: f32,
+    /// A sample that sees through to a surface behind it is an outlier only
+    /// when no surface at its depth is measured within this lateral distance
+    /// (metres, projected at the sample's depth): poses off by less than this
+    /// are not punished at their silhouettes.
+    pub lateral_slack_m: f32,
+    /// Poses whose inlier fraction is below this fail.
+    pub min_inlier_fraction: f32,
+    /// Poses whose fit (inliers × coverage × (1 − behind)) is below this fail.
+    pub min_fit: f32,
+    /// Poses whose front surface lies behind the measured surface in more than
+    /// this share of the mask cells they reach fail.
+    pub max_behind_fraction: f32,
+    /// On a flat measured patch, poses with more than this share of their
+    /// visible samples off the patch's plane fail.
+    pub max_off_plane: f32,
+    /// Poses whose median in-mask depth residual exceeds this fail (metres).
+    pub max_residual_m: f32,
+}
+
+impl Default for VerifyConfig {
+    fn default() -> Self {
+        Self {
+            grid: 24,
+            tolerance_base_m: 0.008,
+            tolerance_per_m: 0.006,
+            lateral_slack_m: 0.012,
+            min_inlier_fraction: 0.5,
+            min_fit: 0.3,
+            max_behind_fraction: 0.3,
+            max_off_plane: 0.3,
+            max_residual_m: 0.02,
+        }
+    }
+}
+
+/// The outcome of one pose's check.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Verification {
+    /// `inlier_fraction × mask_coverage`, 0..1.
+    pub fit: f32,
+    /// Median |measured − model| depth over the in-mask samples not hidden behind
+    /// the measured surface (metres; NaN when none).
+    pub depth_residual_m: f32,
+    /// Inliers / judged samples of the visible model surface.
+    pub inlier_fraction: f32,
+    /// Mask cells (with a depth reading) the model covers / mask cells with a depth reading.
+    pub mask_coverage: f32,
+    /// Mask cells where the model's front surface lies behind the measured
+    /// surface / mask cells the model reaches.
+    pub behind_fraction: f32,
+    /// Share of the model's visible samples off the plane of a flat measured
+    /// mask (0 when the mask is not flat).
+    pub off_plane: f32,
+    /// Samples judged (inliers + outliers).
+    pub judged_cells: u32,
+    /// Whether the pose passed [`VerifyConfig::min_inlier_fraction`],
+    /// [`VerifyConfig::min_fit`], [`VerifyConfig::max_behind_fraction`] and
+    /// [`VerifyConfig::max_residual_m`].
+    pub passed: bool,
+}
+
+/// Which pixels belong to the instance: `ids[p] == id`.
+#[derive(Clone, Copy, Debug)]
+pub struct MaskRef<'a> {
+    pub ids: &'a [u32],
+    pub id: u32,
+    /// The mask's box [u_min, v_min, u_max, v_max], inclusive.
+    pub bbox: [u16; 4],
+}
+
+/// Verifies poses of one object set; one per camera (holds scratch buffers).
+pub struct Verifier {
+    config: VerifyConfig,
+    /// Surface samples per class (id − 1), object frame, metres.
+    samples: Vec<Vec<[f32; 3]>>,
+    /// Per grid cell: a sample agreeing with the measured depth falls in it.
+    explained: Vec<bool>,
+    /// Per grid cell: the nearest sample's depth (the model's front surface; infinity = none).
+    zbuf: Vec<f32>,
+    /// In-mask residuals of the current pose (capacity: the most samples of a class).
+    residuals: Vec<f32>,
+}
+
+impl Verifier {
+    pub fn new(objects: &ObjectSet, config: VerifyConfig) -> Self {
+        let grid = config.grid.clamp(4, 128);
+        let samples: Vec<Vec<[f32; 3]>> = objects
+            .objects
+            .iter()
+            .map(|o| o.samples.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect())
+            .collect();
+        let max_samples = samples.iter().map(Vec::len).max().unwrap_or(0);
+        Self {
+            config: VerifyConfig { grid, ..config },
+            samples,
+            explained: vec![false; grid * grid],
+            zbuf: vec![f32::INFINITY; grid * grid],
+            residuals: Vec::with_capacity(max_samples),
+        }
+    }
+
+    pub fn config(&self) -> &VerifyConfig {
+        &self.config
+    }
+
+    /// Checks `pose` against the frame's depth and the instance mask.
+    pub fn verify(&mut self, frame: &FrameView<'_>, mask: MaskRef<'_>, pose: &ObjectPose) -> Verification {
+        let fail = Verification { depth_residual_m: f32::NAN, ..Verification::default() };
+        let Some(samples) = (pose.class_id as usize).checked_sub(1).and_then(|i| self.samples.get(i)) else {
+            return fail;
+        };
+        let (w, h) = (frame.width(), frame.height());
+        if w == 0 || h == 0 || mask.ids.len() < w * h {
+            return fail;
+        }
+        let k = &frame.intrinsics;
+        let r = pose.rotation.to_rotation_matrix();
+        let m = r.matrix().map(|v| v as f32);
+        let t = pose.translation.map(|v| v as f32);
+        let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+        let project = |p: &[f32; 3]| -> Option<(f32, f32, f32)> {
+            let x = m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0];
+            let y = m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1];
+            let z = m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2];
+            (z > 1e-3 && z.is_finite()).then(|| (fx * x / z + cx, fy * y / z + cy, z))
+        };
+        // Window: the mask's box joined with the model's projected box, inside the image.
+        let [mu0, mv0, mu1, mv1] = mask.bbox.map(|v| v as f32);
+        let (mut u0, mut v0, mut u1, mut v1) = (mu0, mv0, mu1, mv1);
+        for p in samples {
+            if let Some((u, v, _)) = project(p) {
+                (u0, v0, u1, v1) = (u0.min(u), v0.min(v), u1.max(u), v1.max(v));
+            }
+        }
+        let (u0, v0) = (u0.max(0.0), v0.max(0.0));
+        let (u1, v1) = (u1.min((w - 1) as f32), v1.min((h - 1) as f32));
+        if !(u1 > u0 && v1 > v0) {
+            return fail;
+        }
+        let g = self.config.grid;
+        let (cw, ch) = ((u1 - u0 + 1.0) / g as f32, (v1 - v0 + 1.0) / g as f32);
+        let cfg = self.config;
+        // Every sample judged at its own pixel: measured surface behind it = the
+        // camera sees through where the object should be; in front = hidden side
+        // or occluder, no evidence; within the tolerance = the pose explains it.
+        self.explained.fill(false);
+        self.zbuf.fill(f32::INFINITY);
+        let (mut inliers, mut outliers) = (0u32, 0u32);
+        self.residuals.clear();
+        for p in samples {
+            let Some((u, v, z)) = project(p) else { continue };
+            let (gx, gy) = ((u - u0 + 0.5) / cw, (v - v0 + 0.5) / ch);
+            let cell =
+                (gx >= 0.0 && gy >= 0.0 && gx < g as f32 && gy < g as f32).then(|| gy as usize * g + gx as usize);
+            if let Some(c) = cell {
+                self.zbuf[c] = self.zbuf[c].min(z);
+            }
+            let (pu, pv) = (u.round(), v.round());
+            if pu < 0.0 || pv < 0.0 || pu >= w as f32 || pv >= h as f32 {
+                continue;
+            }
+            let px = pv as usize * w + pu as usize;
+            let Some(z_obs) = frame.depth.metres(px) else { continue };
+            let tol = cfg.tolerance_base_m + cfg.tolerance_per_m * z;
+            let res = z_obs - z;
+            if mask.ids[px] == mask.id && res >= -tol && self.residuals.len() < self.residuals.capacity() {
+                self.residuals.push(res.abs());
+            }
+            if res > tol {
+                // A silhouette slightly off (a pose error under
+                // `lateral_slack_m`, depth edge noise) is no evidence: only a
+                // measured surface behind the sample all around it is.
+                let r = (cfg.lateral_slack_m * fx / z).clamp(2.0, 24.0);
+                if !surface_near(frame, pu as usize, pv as usize, w, h, r, z, tol) {
+                    outliers += 1;
+                }
+            } else if res >= -tol {
+                inliers += 1;
+                if let Some(c) = cell {
+                    self.explained[c] = true;
+                }
+            }
+        }
+        // Coverage on the grid: mask cells (centre pixel in the mask, with depth)
+        // with an inlier in their 3x3 neighbourhood (samples are sparser than
+        // pixels on near objects, so a cell of its own may hold none).
+        // And the model's front surface behind the measured one inside the mask
+        // (the whole model too far away: its samples all look hidden).
+        let (mut mask_cells, mut mask_covered, mut front_cells, mut behind_cells) = (0u32, 0u32, 0u32, 0u32);
+        let mut plane = Moments::default();
+        for gy in 0..g {
+            let v = ((v0 + (gy as f32 + 0.5) * ch - 0.5).round() as usize).min(h - 1);
+            for gx in 0..g {
+                let u = ((u0 + (gx as f32 + 0.5) * cw - 0.5).round() as usize).min(w - 1);
+                let px = v * w + u;
+                let Some(z_obs) = frame.depth.metres(px).filter(|_| mask.ids[px] == mask.id) else { continue };
+                mask_cells += 1;
+                plane.add([(u as f32 - cx) / fx * z_obs, (v as f32 - cy) / fy * z_obs, z_obs]);
+                // Nearest model depth around the cell: one sample per cell may sit
+                // on a far part of a sloped surface.
+                let mut z_front = f32::INFINITY;
+                for y in gy.saturating_sub(1)..=(gy + 1).min(g - 1) {
+                    for x in gx.saturating_sub(1)..=(gx + 1).min(g - 1) {
+                        z_front = z_front.min(self.zbuf[y * g + x]);
+                    }
+                }
+                if self.zbuf[gy * g + gx].is_finite() {
+                    front_cells += 1;
+                    behind_cells += (z_obs < z_front - cfg.tolerance_base_m - cfg.tolerance_per_m * z_front) as u32;
+                }
+                let near = (gy.saturating_sub(1)..=(gy + 1).min(g - 1))
+                    .any(|y| (gx.saturating_sub(1)..=(gx + 1).min(g - 1)).any(|x| self.explained[y * g + x]));
+                mask_covered += near as u32;
+            }
+        }
+        let judged = inliers + outliers;
+        let inlier_fraction = if judged > 0 { inliers as f32 / judged as f32 } else { 0.0 };
+        let mask_coverage = if mask_cells > 0 { mask_covered as f32 / mask_cells as f32 } else { 0.0 };
+        let behind_fraction = if front_cells > 0 { behind_cells as f32 / front_cells as f32 } else { 0.0 };
+        let depth_residual_m = median(&mut self.residuals);
+        // A flat measured patch (a table, a wall) explained by a model whose
+        // visible surface is not flat there is no object: the share of the
+        // model's judged samples off the patch's plane.
+        let off_plane = match plane.flat_plane(FLAT_RMS_M) {
+            Some((n, d)) if judged > 0 => {
+                let off = samples
+                    .iter()
+                    .filter_map(|p| project(p).map(|(u, v, z)| (u, v, z, p)))
+                    .filter(|&(u, v, _, _)| u >= u0 && v >= v0 && u <= u1 && v <= v1)
+                    .filter(|&(u, v, z, _)| {
+                        let (pu, pv) = (u.round() as usize, v.round() as usize);
+                        frame
+                            .depth
+                            .metres(pv * w + pu)
+                            .is_some_and(|z_obs| z_obs - z >= -(cfg.tolerance_base_m + cfg.tolerance_per_m * z))
+                    })
+                    .map(|(_, _, _, p)| {
+                        let x = [
+                            m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0],
+                            m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1],
+                            m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2],
+                        ];
+                        ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() > OFF_PLANE_M) as u32
+                    })
+                    .fold((0u32, 0u32), |(o, a), f| (o + f, a + 1));
+                if off.1 > 0 { off.0 as f32 / off.1 as f32 } else { 0.0 }
+            }
+            _ => 0.0,
+        };
+        let fit = inlier_fraction * mask_coverage * (1.0 - behind_fraction) * (1.0 - off_plane);
+        let passed = off_plane <= cfg.max_off_plane
+            && inlier_fraction >= cfg.min_inlier_fraction
+            && fit >= cfg.min_fit
+            && behind_fraction <= cfg.max_behind_fraction
+            && depth_residual_m.is_finite()
+            && depth_residual_m <= cfg.max_residual_m;
+        Verification {
+            fit,
+            depth_residual_m,
+            inlier_fraction,
+            mask_coverage,
+            behind_fraction,
+            off_plane,
+            judged_cells: judged,
+            passed,
+        }
+    }
+}
+
+/// Whether a surface within `tol` of depth `z` (metres) is measured within
+/// `r` pixels of `(u, v)` — the object's real silhouette edge nearby: 8
+/// directions at a third, two thirds and all of `r` (24 probes instead of a
+/// full disc).
+#[allow(clippy::too_many_arguments)] // a pixel, the frame size, a radius and a depth band
+fn surface_near(frame: &FrameView<'_>, u: usize, v: usize, w: usize, h: usize, r: f32, z: f32, tol: f32) -> bool {
+    const DIRS: [(f32, f32); 8] = [
+        (1.0, 0.0),
+        (-1.0, 0.0),
+        (0.0, 1.0),
+        (0.0, -1.0),
+        (0.707, 0.707),
+        (-0.707, 0.707),
+        (0.707, -0.707),
+        (-0.707, -0.707),
+    ];
+    let near = |x: f32, y: f32| {
+        x >= 0.0
+            && y >= 0.0
+            && (x as usize) < w
+            && (y as usize) < h
+            && frame.depth.metres(y as usize * w + x as usize).is_some_and(|d| (d - z).abs() <= tol)
+    };
+    [r / 3.0, 2.0 * r / 3.0, r]
+        .iter()
+        .any(|&d| DIRS.iter().any(|&(dx, dy)| near(u as f32 + dx * d + 0.5, v as f32 + dy * d + 0.5)))
+}
+
+/// A measured patch whose points lie within this RMS distance of one plane is flat (metres).
+const FLAT_RMS_M: f32 = 0.003;
+/// A model sample farther than this from a flat patch's plane is off it (metres).
+const OFF_PLANE_M: f32 = 0.015;
+
+/// First and second moments of 3D points, for a least-squares plane.
+#[derive(Default)]
+struct Moments {
+    n: f32,
+    s: [f32; 3],
+    ss: [[f32; 3]; 3],
+}
+
+impl Moments {
+    fn add(&mut self, p: [f32; 3]) {
+        self.n += 1.0;
+        for i in 0..3 {
+            self.s[i] += p[i];
+            for j in 0..3 {
+                self.ss[i][j] += p[i] * p[j];
+            }
+        }
+    }
+
+    /// The best-fit plane `n·x = d` (unit `n`) when the points lie within
+    /// `max_rms` of it and there are enough of them; else `None`.
+    fn flat_plane(&self, max_rms: f32) -> Option<([f32; 3], f32)> {
+        if self.n < 12.0 {
+            return None;
+        }
+        let mean = self.s.map(|v| v / self.n);
+        let cov = nalgebra::Matrix3::from_fn(|i, j| self.ss[i][j] / self.n - mean[i] * mean[j]);
+        let eig = nalgebra::SymmetricEigen::new(cov);
+        let k = eig.eigenvalues.imin();
+        let rms = eig.eigenvalues[k].max(0.0).sqrt();
+        if rms > max_rms {
+            return None;
+        }
+        let n = eig.eigenvectors.column(k);
+        let n = [n[0], n[1], n[2]];
+        Some((n, n[0] * mean[0] + n[1] * mean[1] + n[2] * mean[2]))
+    }
+}
+
+/// Median of `v` (reordered in place); NaN when empty.
+fn median(v: &mut [f32]) -> f32 {
+    if v.is_empty() {
+        return f32::NAN;
+    }
+    let mid = v.len() / 2;
+    let (_, m, _) = v.select_nth_unstable_by(mid, f32::total_cmp);
+    *m
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn median_of_odd_even_and_empty() {
+        assert_eq!(median(&mut [3.0, 1.0, 2.0]), 2.0);
+        assert_eq!(median(&mut [4.0, 1.0, 3.0, 2.0]), 3.0);
+        assert!(median(&mut []).is_nan());
+    }
+}

@@ -1,0 +1,152 @@
+//! Instance labels end to end (issue 24): this process renders two identical
+//! objects touching in the image, publishes the frame with an instance plane
+//! through `Producer` (`LabelsMut::Instances`), a separate `fuseposed` (ICP on
+//! the built-in objects) estimates it, and this process receives the pose
+//! message: one pose per instance, with distinct instance ids and the
+//! `FROM_INSTANCE_LABELS` flag. The same frame with class labels gives one
+//! region, so one pose: only the instance plane tells the two apart.
+
+use std::time::Duration;
+
+use fusepose_client::{
+    ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, LabelFormat, LabelsMut, PoseFlags, Producer,
+    WireObjectPose, monotonic_ns,
+};
+use fusepose_scene::metrics::ObjectMetric;
+use fusepose_scene::render::{RenderItem, RenderSettings, RenderTarget, render_scene};
+use fusepose_scene::{Intrinsics, Pose};
+use fusepose_tests::*;
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+/// The built-in `sugar_box`: both objects are this class.
+const CLASS: u16 = 2;
+/// A pose is right when its ADD-S is below this fraction of the diameter.
+const CORRECT_FRACTION_OF_DIAMETER: f64 = 0.1;
+
+fn intrinsics() -> Intrinsics {
+    Intrinsics { fx: 520.0, fy: 520.0, cx: 159.5, cy: 119.5, width: 320, height: 240 }
+}
+
+/// Two sugar boxes side by side, the right one 2 cm further away and
+/// overlapping the left one's silhouette by a tenth of its width.
+fn scene_poses(width_m: f64) -> [Pose; 2] {
+    let tilt = UnitQuaternion::from_scaled_axis(Vector3::new(0.4, 0.2, 0.0));
+    let half = 0.45 * width_m;
+    [
+        Pose::from_parts(Translation3::new(-half, 0.0, 0.55), tilt),
+        Pose::from_parts(Translation3::new(half, 0.0, 0.57), tilt),
+    ]
+}
+
+#[test]
+fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> {
+    let env = TestEnv::new("instances")?;
+    let config = env.write_daemon_config("kind = \"icp\"\nmax_instances = 8\nmin_pixels = 50")?;
+    let _daemon = start_daemon(&env, &config)?;
+
+    let objects = fusepose_scene::builtin::builtin_objects();
+    let model = objects.by_class(CLASS).expect("built-in class 2");
+    let metric = ObjectMetric::for_model(model).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let width_m = model.bbox_max.x - model.bbox_min.x;
+    let truth = scene_poses(width_m);
+    let k = intrinsics();
+    let mut target = RenderTarget::for_intrinsics(&k);
+    let items: Vec<RenderItem<'_>> = truth
+        .iter()
+        .enumerate()
+        .map(|(i, pose)| RenderItem { mesh: &model.mesh, pose: *pose, instance_label: i as u16 + 1 })
+        .collect();
+    render_scene(&items, &k, &RenderSettings::default(), &mut target).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let ids = target.labels();
+    let pixels = |id: u16| ids.iter().filter(|&&l| l == id).count();
+    assert!(pixels(1) > 500 && pixels(2) > 500, "both boxes visible: {} and {} px", pixels(1), pixels(2));
+    let w = k.width as usize;
+    let touching = (0..ids.len()).any(|p| ids[p] == 1 && p % w + 1 < w && ids[p + 1] == 2);
+    assert!(touching, "the two instances share an edge in the image");
+
+    let layout = FrameLayout {
+        width: k.width,
+        height: k.height,
+        color_format: ColorFormat::Rgb8,
+        depth_format: DepthFormat::U16,
+        depth_scale: 1e-4,
+        labels: Some(LabelFormat::InstanceU16 { max_instances: 2 }),
+    };
+    let ipc = Ipc::new(&env.ipc_options())?;
+    let mut producer = Producer::create(&ipc, "cam0", layout)?;
+    let mut consumer = Consumer::open(&ipc, "cam0")?;
+
+    // The frame with its instance plane, written in place through the producer API.
+    let mut frame = producer.loan()?;
+    frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+    let planes = frame.planes_mut();
+    planes.color.copy_from_slice(target.rgb());
+    let DepthMut::U16(depth) = planes.depth else { panic!("u16 depth layout") };
+    depth.copy_from_slice(target.depth_u16());
+    let Some(LabelsMut::Instances { ids: id_plane, classes }) = planes.labels else {
+        panic!("an instance layout gives an instance plane")
+    };
+    id_plane.copy_from_slice(ids);
+    classes.copy_from_slice(&[0, CLASS, CLASS]);
+    let sequence = frame.send()?;
+    let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
+    assert!(msg.is_ok(), "status {:#x}, reason {:?}", msg.status, msg.invalid());
+    let poses = msg.objects();
+    assert_eq!(poses.len(), 2, "one pose per instance: {poses:?}");
+    assert_ne!(poses[0].instance_id, poses[1].instance_id);
+    let mut matched = [false; 2];
+    for o in poses {
+        assert_eq!(o.class_id, CLASS);
+        assert_ne!(o.flags & PoseFlags::FROM_INSTANCE_LABELS, 0, "mask from the frame's instance plane");
+        check_verification_fields(o);
+        let estimate = wire_pose(o.quaternion, o.translation_m);
+        let errors = truth.map(|t| metric.add_s(&estimate, &t));
+        let nearest = if errors[0] <= errors[1] { 0 } else { 1 };
+        assert!(
+            errors[nearest] < CORRECT_FRACTION_OF_DIAMETER * model.diameter,
+            "instance {}: ADD-S {:.1} mm",
+            o.instance_id,
+            errors[nearest] * 1e3
+        );
+        matched[nearest] = true;
+        assert_eq!(o.mask_pixels as usize, pixels(nearest as u16 + 1), "the instance's whole mask");
+    }
+    assert_eq!(matched, [true, true], "each box has its own pose");
+
+    // The same frame with class labels: the touching pair is one region.
+    let class_layout = FrameLayout { labels: Some(LabelFormat::U16), ..layout };
+    let mut header = class_layout.header(producer.camera_id());
+    (header.fx, header.fy, header.cx, header.cy) = (k.fx, k.fy, k.cx, k.cy);
+    header.sequence = producer.next_sequence();
+    header.capture_time_ns = monotonic_ns();
+    let [color, depth, labels] = class_layout.planes();
+    let mut payload = vec![0u8; class_layout.payload_len()];
+    payload[color.offset as usize..color.end() as usize].copy_from_slice(target.rgb());
+    for (i, d) in target.depth_u16().iter().enumerate() {
+        let at = depth.offset as usize + 2 * i;
+        payload[at..at + 2].copy_from_slice(&d.to_le_bytes());
+    }
+    for (i, &id) in ids.iter().enumerate() {
+        let at = labels.offset as usize + 2 * i;
+        let class = if id == 0 { 0 } else { CLASS };
+        payload[at..at + 2].copy_from_slice(&class.to_le_bytes());
+    }
+    producer.send_raw(header, &payload)?;
+    let msg = wait_for_sequence(&mut consumer, header.sequence, Duration::from_secs(120))?;
+    assert!(msg.is_ok(), "status {:#x}, reason {:?}", msg.status, msg.invalid());
+    assert_eq!(msg.object_count, 1, "class labels merge the touching pair: {:?}", msg.objects());
+    assert_eq!(msg.objects()[0].flags & PoseFlags::FROM_INSTANCE_LABELS, 0);
+    check_verification_fields(&msg.objects()[0]);
+    Ok(())
+}
+
+/// Only the two defined flag bits are used; the scores are NaN exactly when
+/// the pose was not verified, and a verified pose has a passing result.
+fn check_verification_fields(o: &WireObjectPose) {
+    assert_eq!(o.flags & !(PoseFlags::VERIFIED | PoseFlags::FROM_INSTANCE_LABELS), 0, "flags {:#x}", o.flags);
+    if o.fit_score.is_nan() {
+        assert!(o.depth_residual_m.is_nan() && !o.is_verified(), "{o:?}");
+    } else {
+        assert!((0.0..=1.0).contains(&o.fit_score) && o.depth_residual_m >= 0.0, "{o:?}");
+    }
+}
