@@ -15,6 +15,14 @@
 //! net` the built-in segmenter's ([`masks`]); `--masks gt,net` evaluates
 //! every estimator with both on the same frames. `--overlay DIR` writes one
 //! PNG per frame (labels tinted, poses drawn).
+//!
+//! Verification (`--verify drop|flag|off`, default `drop` as in the daemon)
+//! checks each pose against the depth image and counts what fails, ghosts
+//! apart from poses of real objects; `FUSEPOSE_VERIFY_TRACE=1` prints each
+//! pose's verification terms to stderr (how the thresholds were chosen on the
+//! tuning split, docs/BENCHMARKS.md). `--masks gt-instances` sends the true
+//! masks as an instance plane, and every run with true instance masks in the
+//! dataset reports instance precision / recall and merged / split regions.
 
 mod cast;
 mod dataset;

@@ -1,11 +1,12 @@
 //! `fusepose objects`: list an object set (built-in or a folder of meshes) or
 //! export the built-in set as OBJ + MTL + PNG folders with `models_info.json`.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use fusepose_scene::export::export_objects;
-use fusepose_scene::mesh_io::load_object_set;
+use fusepose_scene::mesh_io::checks::{MissingTextures, suggest_symmetry};
+use fusepose_scene::mesh_io::load_object_dir_checked;
 use fusepose_scene::{ObjectSet, Symmetry, builtin::builtin_objects};
 
 #[derive(clap::Args)]
@@ -16,7 +17,8 @@ pub struct Args {
 
 #[derive(clap::Subcommand)]
 enum Command {
-    /// Print each object: class id, name, triangles, diameter (mm), symmetry.
+    /// Print each object: class id, name, triangles, diameter (mm), symmetry, and the
+    /// symmetry its geometry suggests; then any mesh-check warnings.
     List {
         /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
         #[arg(long, default_value = "builtin")]
@@ -35,8 +37,16 @@ enum Command {
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         Command::List { objects, scale } => {
-            let set = load_object_set(&objects, scale).with_context(|| format!("loading object set '{objects}'"))?;
+            let (set, warnings) = if objects == "builtin" {
+                (builtin_objects(), Vec::new())
+            } else {
+                load_object_dir_checked(Path::new(&objects), scale, MissingTextures::Warn)
+                    .with_context(|| format!("loading object set '{objects}'"))?
+            };
             print!("{}", table(&set));
+            for w in &warnings {
+                println!("warning: {w}");
+            }
             Ok(())
         }
         Command::Export { dir } => {
@@ -64,19 +74,25 @@ fn describe(symmetry: &Symmetry) -> String {
     }
 }
 
-/// The listing: one line per object, class id first.
+/// The listing: one line per object, class id first; the last column is a
+/// suggestion computed from the shape only (a texture may break it), never applied.
 fn table(set: &ObjectSet) -> String {
     let width = set.objects.iter().map(|o| o.name.len()).max().unwrap_or(4).max(4);
-    let mut out =
-        format!("{:>5}  {:<width$}  {:>9}  {:>13}  symmetry\n", "class", "name", "triangles", "diameter (mm)");
-    for (i, o) in set.objects.iter().enumerate() {
+    let declared: Vec<String> = set.objects.iter().map(|o| describe(&o.symmetry)).collect();
+    let sym_width = declared.iter().map(|d| d.len()).max().unwrap_or(8).max(8);
+    let mut out = format!(
+        "{:>5}  {:<width$}  {:>9}  {:>13}  {:<sym_width$}  suggested from geometry\n",
+        "class", "name", "triangles", "diameter (mm)", "symmetry"
+    );
+    for (i, (o, declared)) in set.objects.iter().zip(&declared).enumerate() {
         out += &format!(
-            "{:>5}  {:<width$}  {:>9}  {:>13.1}  {}\n",
+            "{:>5}  {:<width$}  {:>9}  {:>13.1}  {:<sym_width$}  {}\n",
             i + 1,
             o.name,
             o.mesh.triangles.len(),
             o.diameter * 1e3,
-            describe(&o.symmetry)
+            declared,
+            suggest_symmetry(o)
         );
     }
     out
@@ -93,10 +109,15 @@ mod tests {
         assert_eq!(text.lines().count(), set.len() + 1);
         let cracker = text.lines().find(|l| l.contains("cracker_box")).unwrap();
         assert!(
-            cracker.trim_start().starts_with("1 ") && cracker.contains("270.7") && cracker.ends_with("none"),
+            cracker.trim_start().starts_with("1 ") && cracker.contains("270.7") && cracker.contains(" none "),
             "{cracker}"
         );
+        assert!(text.lines().next().unwrap().ends_with("suggested from geometry"));
         assert!(text.lines().any(|l| l.contains("wood_block") && l.contains("discrete (7 + identity)")));
-        assert!(text.lines().any(|l| l.contains("bowl") && l.contains("continuous")));
+        // Declared continuous, and suggested continuous about (≈ 0, ≈ 0, 1).
+        let bowl = text.lines().find(|l| l.contains("bowl")).unwrap();
+        assert!(bowl.contains("through") && bowl.contains("continuous about (") && bowl.ends_with(", 1.00)"), "{bowl}");
+        let mug = text.lines().find(|l| l.contains("mug")).unwrap();
+        assert!(mug.ends_with(" none"), "{mug}");
     }
 }

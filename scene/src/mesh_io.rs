@@ -4,11 +4,13 @@
 //! Units: files are read as metres times `scale` (pass 0.001 for millimetre
 //! models such as BOP's). Meshes keep the file's object frame.
 
+pub mod checks;
 mod obj;
 mod ply;
 
 use std::path::{Path, PathBuf};
 
+use self::checks::{CheckError, CheckWarning, MissingTextures, TextureIssue};
 use crate::export::ModelsInfo;
 use crate::model::{Mesh, ObjectModel, ObjectSet, Symmetry, Texture};
 use crate::surface::{SurfaceError, compute_vertex_normals, validate_mesh};
@@ -30,6 +32,9 @@ pub enum MeshError {
     NoMesh { path: PathBuf },
     #[error("{path}: bad models_info.json: {error}")]
     ModelsInfo { path: PathBuf, error: serde_json::Error },
+    /// A user's mesh failed a check of [`checks`] (units, textures, geometry, names).
+    #[error(transparent)]
+    Check(#[from] CheckError),
 }
 
 /// Loads a triangle mesh, choosing the parser by extension (`.obj`, `.ply`,
@@ -37,11 +42,27 @@ pub enum MeshError {
 /// unit). Smooth vertex normals are computed when the file has none; the
 /// result is validated (indices, attribute lengths) before it is returned.
 pub fn load_mesh(path: &Path, scale: f64) -> Result<Mesh, MeshError> {
+    let (mesh, textures) = read_mesh(path, scale)?;
+    for t in &textures {
+        tracing::warn!(
+            "{}: texture {} named by {} unavailable ({}), using the material colour instead",
+            path.display(),
+            t.texture.display(),
+            t.named_in.display(),
+            t.reason
+        );
+    }
+    finish_mesh(path, mesh)
+}
+
+/// Parses a mesh file and scales its positions; also returns the textures it
+/// names that could not be used.
+fn read_mesh(path: &Path, scale: f64) -> Result<(Mesh, Vec<TextureIssue>), MeshError> {
     if !(scale.is_finite() && scale > 0.0) {
         return Err(MeshError::BadScale { path: path.to_owned(), scale });
     }
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    let mut mesh = match ext.as_deref() {
+    let (mut mesh, textures) = match ext.as_deref() {
         Some("obj") => obj::load_obj(path)?,
         Some("ply") => ply::load_ply(path)?,
         _ => {
@@ -53,6 +74,11 @@ pub fn load_mesh(path: &Path, scale: f64) -> Result<Mesh, MeshError> {
             *p = p.map(|c| (c as f64 * scale) as f32);
         }
     }
+    Ok((mesh, textures))
+}
+
+/// Validates a read mesh and fills in smooth normals when it has none.
+fn finish_mesh(path: &Path, mut mesh: Mesh) -> Result<Mesh, MeshError> {
     validate_mesh(&mesh).map_err(|error| MeshError::Invalid { path: path.to_owned(), error })?;
     if mesh.normals.is_empty() {
         mesh.normals = compute_vertex_normals(&mesh);
@@ -76,7 +102,25 @@ pub fn load_object(path: &Path, scale: f64, name: &str, symmetry: Symmetry) -> R
 /// same class ids) and their symmetries; unlisted objects follow, by name,
 /// with [`Symmetry::None`]. Symmetry translations in that file are in
 /// metres and are multiplied by `scale` like the meshes.
+///
+/// Every mesh is checked ([`checks`]): wrong units, unreadable textures,
+/// empty or degenerate meshes and duplicate names are errors naming the file
+/// and the fix; huge meshes and missing textures are logged as warnings.
 pub fn load_object_dir(dir: &Path, scale: f64) -> Result<ObjectSet, MeshError> {
+    let (set, warnings) = load_object_dir_checked(dir, scale, MissingTextures::Warn)?;
+    for w in warnings {
+        tracing::warn!("{w}");
+    }
+    Ok(set)
+}
+
+/// [`load_object_dir`], returning the check warnings instead of logging them;
+/// `missing` says whether a texture file that does not exist is an error.
+pub fn load_object_dir_checked(
+    dir: &Path,
+    scale: f64,
+    missing: MissingTextures,
+) -> Result<(ObjectSet, Vec<CheckWarning>), MeshError> {
     let io = |error| MeshError::Io { path: dir.to_owned(), error };
     let info = read_models_info(dir)?;
     let mut found: Vec<(String, PathBuf)> = Vec::new();
@@ -95,21 +139,29 @@ pub fn load_object_dir(dir: &Path, scale: f64) -> Result<ObjectSet, MeshError> {
     if found.is_empty() {
         return Err(MeshError::NoMesh { path: dir.to_owned() });
     }
+    checks::check_unique_names(&found)?;
     // Objects listed in models_info.json keep its class order; others follow by name.
     let class_of = |name: &str| {
         info.as_ref().and_then(|i| i.objects.iter().find(|o| o.name == name)).map_or(u32::MAX, |o| o.class_id as u32)
     };
     found.sort_by(|a, b| (class_of(&a.0), &a.0).cmp(&(class_of(&b.0), &b.0)));
     let mut set = ObjectSet::default();
+    let mut warnings = Vec::new();
     for (name, path) in found {
         let symmetry = info
             .as_ref()
             .and_then(|i| i.symmetry_of(&name))
             .map(|s| scale_symmetry(s, scale))
             .unwrap_or(Symmetry::None);
-        set.objects.push(load_object(&path, scale, &name, symmetry)?);
+        let (mesh, textures) = read_mesh(&path, scale)?;
+        warnings.extend(checks::check_mesh(&path, &mesh, &textures, missing)?);
+        let mesh = finish_mesh(&path, mesh)?;
+        let object = ObjectModel::from_mesh(&name, mesh, symmetry)
+            .map_err(|error| MeshError::Invalid { path: path.clone(), error })?;
+        checks::check_units(&path, object.diameter, scale)?;
+        set.objects.push(object);
     }
-    Ok(set)
+    Ok((set, warnings))
 }
 
 /// The object set named on a command line: `builtin` (the built-in set, in

@@ -592,7 +592,7 @@ def build_scene(rng, classes, meshes, scene_index, args, log):
     # Objects: distinct classes, mostly upright, rejection-sampled footprints.
     n = min(len(classes), rng.randint(args.min_objects, args.max_objects))
     chosen = rng.sample(range(len(classes)), n)
-    radius = rng.uniform(0.1, 0.2)
+    radius = rng.uniform(0.06, 0.15)
     centre = (rng.uniform(-0.1, 0.1), rng.uniform(-0.08, 0.08))
     limit = (table_size[0] / 2 - 0.03, table_size[1] / 2 - 0.03)
     placed = []
@@ -716,7 +716,7 @@ def sample_view(rng, instances):
     for _ in range(200):
         target = mean + Vector((rng.gauss(0, 0.03), rng.gauss(0, 0.03), rng.gauss(0, 0.02)))
         dist = rng.uniform(0.5, 1.3)
-        elev = math.radians(rng.uniform(15.0, 70.0))
+        elev = math.radians(rng.uniform(12.0, 65.0))
         azim = rng.uniform(0, math.tau)
         eye = target + dist * Vector((math.cos(elev) * math.cos(azim), math.cos(elev) * math.sin(azim), math.sin(elev)))
         roll = math.radians(max(-30.0, min(30.0, rng.gauss(0.0, 10.0))))
@@ -973,7 +973,7 @@ def render_split(args):
     tmp = tempfile.mkdtemp(prefix="fusepose_blender_")
     log(f"Blender {bpy.app.version_string}: {len(classes)} classes from {args.objects}; "
         f"{args.scenes} scenes x {args.views} views, seed {args.seed}, {args.samples} samples -> {split_dir}")
-    t_all = time.time()
+    t_all, cpu_all = time.time(), time.process_time()
     done = 0
     try:
         for scene_id in range(args.first_scene, args.first_scene + args.scenes):
@@ -989,7 +989,7 @@ def render_split(args):
             for view in range(args.views):
                 if args.resume and str(view) in gts:
                     continue
-                t0 = time.time()
+                t0, cpu0 = time.time(), time.process_time()
                 vrng = random.Random(f"{args.seed}/view/{scene_id}/{view}")
                 world_from_cv, dist = sample_view(vrng, instances)
                 set_camera_pose(cam, world_from_cv)
@@ -1054,7 +1054,7 @@ def render_split(args):
                 vis = ", ".join(f"{i['visib_fract']:.2f}" for i in info_list)
                 log(f"scene {scene_id} view {view}: {len(gt_list)} objects (visible {vis}), camera {dist:.2f} m, "
                     f"{desc}, gain {gain:.2f}; beauty {t1 - t0:.1f} s, masks/depth {t2 - t1:.1f} s, "
-                    f"write {t3 - t2:.1f} s, total {t3 - t0:.1f} s")
+                    f"write {t3 - t2:.1f} s, total {t3 - t0:.1f} s (CPU {time.process_time() - cpu0:.1f} s)")
             for o in made:
                 if o.type == "LIGHT":
                     data = o.data
@@ -1072,7 +1072,9 @@ def render_split(args):
     finally:
         shutil.rmtree(tmp, ignore_errors=True)
     elapsed = time.time() - t_all
-    log(f"done: {done} frames in {elapsed:.0f} s ({elapsed / max(done, 1):.1f} s per frame)")
+    cpu = time.process_time() - cpu_all
+    log(f"done: {done} frames in {elapsed:.0f} s ({elapsed / max(done, 1):.1f} s per frame; "
+        f"CPU {cpu / max(done, 1):.1f} s per frame)")
 
 
 # ---------------------------------------------------------------- self-test

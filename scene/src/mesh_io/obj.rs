@@ -11,6 +11,7 @@ use std::fs::File;
 use std::io::{BufRead, BufReader, Read};
 use std::path::{Path, PathBuf};
 
+use super::checks::TextureIssue;
 use super::{MeshError, read_texture};
 use crate::model::{Material, Mesh, Texture};
 
@@ -75,31 +76,37 @@ fn is_line_error(e: &tobj::LoadError) -> bool {
     )
 }
 
-pub(super) fn load_obj(path: &Path) -> Result<Mesh, MeshError> {
+/// The mesh and the textures its MTL names that could not be used.
+pub(super) fn load_obj(path: &Path) -> Result<(Mesh, Vec<TextureIssue>), MeshError> {
     let file = File::open(path).map_err(|error| MeshError::Io { path: path.to_owned(), error })?;
     let mut reader = LineCounter { inner: BufReader::new(file), newlines: 0, last_byte: None };
     let dir = path.parent().map(Path::to_owned).unwrap_or_default();
     // Triangulated, one index per vertex, points and lines dropped.
     let options = tobj::GPU_LOAD_OPTIONS;
-    let (models, materials) =
-        tobj::load_obj_buf(&mut reader, &options, |mtl| tobj::load_mtl(dir.join(mtl))).map_err(|e| {
-            MeshError::Parse {
-                path: path.to_owned(),
-                line: is_line_error(&e).then(|| reader.current_line()),
-                message: format!("OBJ {e}"),
-            }
-        })?;
+    // tobj's materials do not say which MTL they came from: remember the libraries.
+    let mtl_files = std::cell::RefCell::new(Vec::new());
+    let (models, materials) = tobj::load_obj_buf(&mut reader, &options, |mtl| {
+        mtl_files.borrow_mut().push(dir.join(mtl));
+        tobj::load_mtl(dir.join(mtl))
+    })
+    .map_err(|e| MeshError::Parse {
+        path: path.to_owned(),
+        line: is_line_error(&e).then(|| reader.current_line()),
+        message: format!("OBJ {e}"),
+    })?;
     let tobj_materials = materials.unwrap_or_else(|e| {
         tracing::warn!("{}: material library unusable ({e}); using plain grey", path.display());
         Vec::new()
     });
-    let mut materials = convert_materials(path, &dir, &tobj_materials);
-    assemble(path, &models, &mut materials)
+    let mtl = mtl_files.into_inner().iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ");
+    let (mut materials, issues) = convert_materials(Path::new(&mtl), &dir, &tobj_materials);
+    Ok((assemble(path, &models, &mut materials)?, issues))
 }
 
-fn convert_materials(obj: &Path, dir: &Path, mats: &[tobj::Material]) -> Vec<Material> {
+/// Materials, and the textures they name that are missing or do not decode.
+fn convert_materials(mtl: &Path, dir: &Path, mats: &[tobj::Material]) -> (Vec<Material>, Vec<TextureIssue>) {
     let mut cache: HashMap<PathBuf, Option<Texture>> = HashMap::new();
-    let mut missing: Vec<String> = Vec::new();
+    let mut issues: Vec<TextureIssue> = Vec::new();
     let out = mats
         .iter()
         .map(|m| {
@@ -110,7 +117,12 @@ fn convert_materials(obj: &Path, dir: &Path, mats: &[tobj::Material]) -> Vec<Mat
                     .or_insert_with(|| match read_texture(&file) {
                         Ok(t) => Some(t),
                         Err(e) => {
-                            missing.push(format!("{} ({e})", file.display()));
+                            issues.push(TextureIssue {
+                                named_in: mtl.to_owned(),
+                                missing: !file.exists(),
+                                texture: file.clone(),
+                                reason: e.to_string(),
+                            });
                             None
                         }
                     })
@@ -124,14 +136,7 @@ fn convert_materials(obj: &Path, dir: &Path, mats: &[tobj::Material]) -> Vec<Mat
             Material { name: m.name.clone(), diffuse: m.diffuse.unwrap_or(DEFAULT_DIFFUSE), texture }
         })
         .collect();
-    if !missing.is_empty() {
-        tracing::warn!(
-            "{}: texture unavailable, using the material colour instead: {}",
-            obj.display(),
-            missing.join("; ")
-        );
-    }
-    out
+    (out, issues)
 }
 
 /// sRGB byte → linear 0..1.

@@ -11,6 +11,7 @@ use std::path::Path;
 use ply_rs::parser::Parser;
 use ply_rs::ply::{DefaultElement, Property};
 
+use super::checks::TextureIssue;
 use super::obj::DEFAULT_DIFFUSE;
 use super::{MeshError, read_texture};
 use crate::model::{Material, Mesh};
@@ -68,7 +69,8 @@ fn split_line(message: &str) -> (Option<usize>, String) {
     (line, text.replace("\n\t", "; ").replace('\n', " "))
 }
 
-pub(super) fn load_ply(path: &Path) -> Result<Mesh, MeshError> {
+/// The mesh and, if its `TextureFile` could not be used, why.
+pub(super) fn load_ply(path: &Path) -> Result<(Mesh, Vec<TextureIssue>), MeshError> {
     let file = File::open(path).map_err(|error| MeshError::Io { path: path.to_owned(), error })?;
     let ply = Parser::<DefaultElement>::new().read_ply(&mut BufReader::new(file)).map_err(|e| {
         let (line, message) = split_line(&e.to_string());
@@ -131,6 +133,7 @@ pub(super) fn load_ply(path: &Path) -> Result<Mesh, MeshError> {
         }
     }
 
+    let mut issues = Vec::new();
     let texture = ply
         .header
         .comments
@@ -142,15 +145,16 @@ pub(super) fn load_ply(path: &Path) -> Result<Mesh, MeshError> {
             match read_texture(&file) {
                 Ok(t) => Some(t),
                 Err(e) => {
-                    tracing::warn!(
-                        "{}: texture {} unavailable ({e}), using the vertex/material colour instead",
-                        path.display(),
-                        file.display()
-                    );
+                    issues.push(TextureIssue {
+                        named_in: path.to_owned(),
+                        missing: !file.exists(),
+                        texture: file,
+                        reason: e.to_string(),
+                    });
                     None
                 }
             }
         });
     mesh.materials.push(Material { name: "default".into(), diffuse: DEFAULT_DIFFUSE, texture });
-    Ok(mesh)
+    Ok((mesh, issues))
 }

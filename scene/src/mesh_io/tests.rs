@@ -2,6 +2,7 @@
 
 use std::path::{Path, PathBuf};
 
+use super::checks::MissingTextures;
 use super::*;
 
 /// A fresh empty folder under the system temp dir, unique per test.
@@ -344,4 +345,229 @@ fn loads_the_ycb_sample_meshes() {
     // The master chef can is ~102 mm across and ~140 mm tall: diameter ~0.17 m.
     let can = &set.objects[2];
     assert!((can.diameter - 0.172).abs() < 0.015, "can diameter {}", can.diameter);
+}
+
+// ---- Checks on users' mesh folders (mesh_io::checks): each bad case, its message. ----
+
+/// A right triangle with legs `a` and `b` (file units) in the xy plane: diameter √(a² + b²).
+fn triangle_obj(a: f64, b: f64) -> String {
+    format!("v 0 0 0\nv {a} 0 0\nv 0 {b} 0\nf 1 2 3\n")
+}
+
+fn dir_error(dir: &Path, scale: f64) -> String {
+    load_object_dir(dir, scale).unwrap_err().to_string()
+}
+
+#[test]
+fn check_millimetre_mesh_names_the_file_its_size_and_scale_fix() {
+    let dir = temp_dir("check-mm");
+    let obj = write(&dir, "can.obj", &triangle_obj(120.0, 160.0)); // 200 mm read as 200 m
+    assert_eq!(
+        dir_error(&dir, 1.0),
+        format!(
+            "{}: the mesh is 200.000 m across as loaded (scale 1); it looks like it is in millimetres. \
+             Graspable objects are 1 cm – 1 m: load it with `--scale 0.001` (it would be 0.200 m)",
+            obj.display()
+        )
+    );
+    // With the suggested scale it loads, 0.2 m across.
+    let set = load_object_dir(&dir, 0.001).unwrap();
+    assert!((set.objects[0].diameter - 0.2).abs() < 1e-6);
+}
+
+#[test]
+fn check_centimetre_mesh_suggests_centimetres_and_mentions_millimetres() {
+    let dir = temp_dir("check-cm");
+    let obj = write(&dir, "box.obj", &triangle_obj(12.0, 16.0)); // 20 cm read as 20 m
+    assert_eq!(
+        dir_error(&dir, 1.0),
+        format!(
+            "{}: the mesh is 20.000 m across as loaded (scale 1); it looks like it is in centimetres. \
+             Graspable objects are 1 cm – 1 m: load it with `--scale 0.01` (it would be 0.200 m); \
+             if it is in millimetres, `--scale 0.001` (0.020 m)",
+            obj.display()
+        )
+    );
+}
+
+#[test]
+fn check_metre_mesh_loaded_as_millimetres_is_too_small() {
+    let dir = temp_dir("check-tiny");
+    let obj = write(&dir, "mug.obj", &triangle_obj(0.06, 0.08)); // 10 cm in metres, with --scale 0.001
+    assert_eq!(
+        dir_error(&dir, 0.001),
+        format!(
+            "{}: the mesh is 0.000 m across as loaded (scale 0.001); it looks like it is in metres but was \
+             loaded as millimetres. Graspable objects are 1 cm – 1 m: load it with `--scale 1` (it would be 0.100 m)",
+            obj.display()
+        )
+    );
+    // Tiny and not explained by units (2 mm across in metres): named, no scale guess.
+    let dir = temp_dir("check-implausible");
+    let obj = write(&dir, "speck.obj", &triangle_obj(0.0012, 0.0016));
+    assert_eq!(
+        dir_error(&dir, 1.0),
+        format!(
+            "{}: the mesh is 0.002 m across as loaded (scale 1), implausible for a graspable object \
+             (1 cm – 1 m) and not explained by mm/cm units; rescale the file so that it is in metres",
+            obj.display()
+        )
+    );
+}
+
+#[test]
+fn check_missing_texture_warns_by_default_and_fails_when_strict() {
+    let dir = temp_dir("check-missing-texture");
+    std::fs::create_dir_all(dir.join("cube")).unwrap();
+    let obj = write(&dir.join("cube"), "cube.obj", &CUBE_OBJ.replace("v 0.5", "v 0.05").replace("v -0.5", "v -0.05"));
+    let mtl = write(&dir.join("cube"), "cube.mtl", CUBE_MTL); // names body.png, not written
+    let png = dir.join("cube").join("body.png");
+    let (set, warnings) = load_object_dir_checked(&dir, 1.0, MissingTextures::Warn).unwrap();
+    assert_eq!(set.len(), 1);
+    assert_eq!(warnings.len(), 1);
+    assert_eq!(
+        warnings[0].to_string(),
+        format!(
+            "{}: texture {} named by {} does not exist; rendering the material colour instead \
+             (put the image there, or delete the `map_Kd` line to silence this)",
+            obj.display(),
+            png.display(),
+            mtl.display()
+        )
+    );
+    let err = load_object_dir_checked(&dir, 1.0, MissingTextures::Fail).unwrap_err().to_string();
+    assert_eq!(
+        err,
+        format!(
+            "{}: texture {} named by {} does not exist; put the image there, or delete the `map_Kd` line \
+             from {} to render the material colour instead",
+            obj.display(),
+            png.display(),
+            mtl.display(),
+            mtl.display()
+        )
+    );
+}
+
+#[test]
+fn check_undecodable_texture_is_an_error_even_by_default() {
+    let dir = temp_dir("check-bad-texture");
+    let obj = write(&dir, "cube.obj", &CUBE_OBJ.replace("v 0.5", "v 0.05").replace("v -0.5", "v -0.05"));
+    let mtl = write(&dir, "cube.mtl", CUBE_MTL);
+    let png = write(&dir, "body.png", "this is not a PNG");
+    let err = dir_error(&dir, 1.0);
+    let expected_start =
+        format!("{}: texture {} named by {} cannot be decoded (", obj.display(), png.display(), mtl.display());
+    assert!(err.starts_with(&expected_start), "{err}");
+    assert!(
+        err.ends_with(&format!(
+            "); put the image there, or delete the `map_Kd` line from {} to render the material colour instead",
+            mtl.display()
+        )),
+        "{err}"
+    );
+}
+
+#[test]
+fn check_empty_mesh_is_named() {
+    let dir = temp_dir("check-empty");
+    let obj = write(&dir, "wire.obj", "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nl 1 2\nl 2 3\n");
+    assert_eq!(
+        dir_error(&dir, 1.0),
+        format!(
+            "{}: the mesh has no triangles (points or lines only?); export it as a triangle or polygon mesh",
+            obj.display()
+        )
+    );
+}
+
+#[test]
+fn check_degenerate_and_non_finite_meshes_are_named() {
+    let dir = temp_dir("check-degenerate");
+    let obj = write(&dir, "flat.obj", "v 0 0 0\nv 0.1 0 0\nv 0.2 0 0\nf 1 2 3\nf 1 1 2\n");
+    assert_eq!(
+        dir_error(&dir, 1.0),
+        format!(
+            "{}: all 2 triangles have zero area (flat or collapsed geometry); re-export the mesh with its surface",
+            obj.display()
+        )
+    );
+    let dir = temp_dir("check-non-finite");
+    let obj = write(&dir, "nan.obj", "v 0 0 0\nv 0.1 0 0\nv 0 NaN 0\nf 1 2 3\n");
+    assert_eq!(
+        dir_error(&dir, 1.0),
+        format!(
+            "{}: vertex 2 has a non-finite coordinate (NaN or infinite); repair or re-export the mesh",
+            obj.display()
+        )
+    );
+}
+
+#[test]
+fn check_huge_mesh_warns_with_its_triangle_count() {
+    let path = Path::new("/data/scan.ply");
+    let mut mesh = Mesh { positions: vec![[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.1, 0.0]], ..Mesh::default() };
+    mesh.triangles = vec![[0, 1, 2]; checks::HUGE_TRIANGLES + 1];
+    let warnings = checks::check_mesh(path, &mesh, &[], MissingTextures::Warn).unwrap();
+    assert_eq!(
+        warnings.iter().map(ToString::to_string).collect::<Vec<_>>(),
+        ["/data/scan.ply: 2000001 triangles (more than 2000000) slow rendering and training; \
+          decimate it (e.g. MeshLab's quadric edge collapse to ~100 k triangles)"]
+    );
+    mesh.triangles.truncate(checks::HUGE_TRIANGLES);
+    assert!(checks::check_mesh(path, &mesh, &[], MissingTextures::Warn).unwrap().is_empty());
+}
+
+#[test]
+fn check_duplicate_object_names_name_both_paths() {
+    let dir = temp_dir("check-duplicate");
+    std::fs::create_dir_all(dir.join("a")).unwrap();
+    let nested = write(&dir.join("a"), "a.obj", &triangle_obj(0.1, 0.1));
+    let flat = write(&dir, "a.obj", &triangle_obj(0.1, 0.1));
+    // Paths in order: `a/a.obj` sorts before `a.obj` (component-wise).
+    assert_eq!(
+        dir_error(&dir, 1.0),
+        format!(
+            "two meshes give the object name 'a': {} and {}; rename or remove one \
+             (names must differ in more than letter case)",
+            nested.display(),
+            flat.display()
+        )
+    );
+
+    let dir = temp_dir("check-duplicate-case");
+    let upper = write(&dir, "Mug.obj", &triangle_obj(0.1, 0.1));
+    let lower = write(&dir, "mug.obj", &triangle_obj(0.1, 0.1));
+    let err = dir_error(&dir, 1.0);
+    assert!(err.starts_with("two meshes give the object name '"), "{err}");
+    assert!(err.contains(&format!("{} and {}", upper.display(), lower.display())), "{err}");
+}
+
+#[test]
+fn symmetry_suggestions_follow_the_geometry() {
+    use checks::{SymmetrySuggestion, suggest_symmetry};
+    let set = crate::builtin::builtin_objects();
+    let bowl = &set.objects[set.class_of("bowl").unwrap() as usize - 1];
+    match suggest_symmetry(bowl) {
+        SymmetrySuggestion::Continuous { axis } => assert!(axis.z.abs() > 0.99, "{axis:?}"),
+        other => panic!("bowl: {other}"),
+    }
+    // The mug's handle breaks its body's rotational symmetry.
+    let mug = &set.objects[set.class_of("mug").unwrap() as usize - 1];
+    assert_eq!(suggest_symmetry(mug), SymmetrySuggestion::None);
+    let block = crate::model::ObjectModel::from_mesh(
+        "block",
+        crate::surface::tests::box_mesh([0.1, 0.06, 0.03]),
+        Symmetry::None,
+    )
+    .unwrap();
+    assert_eq!(suggest_symmetry(&block), SymmetrySuggestion::Box);
+    // An irregular tetrahedron has no rotational symmetry.
+    let tetra = Mesh {
+        positions: vec![[0.0, 0.0, 0.0], [0.1, 0.0, 0.0], [0.0, 0.05, 0.0], [0.01, 0.02, 0.07]],
+        triangles: vec![[0, 2, 1], [0, 1, 3], [1, 2, 3], [2, 0, 3]],
+        ..Mesh::default()
+    };
+    let tetra = crate::model::ObjectModel::from_mesh("tetra", tetra, Symmetry::None).unwrap();
+    assert_eq!(suggest_symmetry(&tetra), SymmetrySuggestion::None);
 }
