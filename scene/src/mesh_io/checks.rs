@@ -54,9 +54,10 @@ pub enum CheckError {
     )]
     ImplausibleSize { path: PathBuf, diameter_m: f64, scale: f64 },
     #[error(
-        "{obj}: texture {texture} named by {mtl} {}; put the image there, or delete the `map_Kd` line \
+        "{obj}: texture {texture} named by {mtl} {}; put the image there, or delete the {} line \
          from {mtl} to render the material colour instead",
-        if *missing { "does not exist".to_string() } else { format!("cannot be decoded ({reason})") }
+        if *missing { "does not exist".to_string() } else { format!("cannot be decoded ({reason})") },
+        texture_line(mtl)
     )]
     Texture { obj: PathBuf, mtl: PathBuf, texture: PathBuf, missing: bool, reason: String },
     #[error("{path}: the mesh has no triangles (points or lines only?); export it as a triangle or polygon mesh")]
@@ -72,6 +73,12 @@ pub enum CheckError {
          (names must differ in more than letter case)"
     )]
     DuplicateName { name: String, first: PathBuf, second: PathBuf },
+}
+
+/// The line that names a texture: `map_Kd` in an MTL, a header comment in a PLY.
+fn texture_line(named_in: &Path) -> &'static str {
+    let ply = named_in.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"));
+    if ply { "`comment TextureFile`" } else { "`map_Kd`" }
 }
 
 /// Something worth telling the user that does not stop loading.
@@ -95,10 +102,11 @@ impl std::fmt::Display for CheckWarning {
             CheckWarning::MissingTexture { path, issue } => write!(
                 f,
                 "{}: texture {} named by {} does not exist; rendering the material colour instead \
-                 (put the image there, or delete the `map_Kd` line to silence this)",
+                 (put the image there, or delete the {} line to silence this)",
                 path.display(),
                 issue.texture.display(),
-                issue.named_in.display()
+                issue.named_in.display(),
+                texture_line(&issue.named_in)
             ),
         }
     }

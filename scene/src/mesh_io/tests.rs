@@ -469,6 +469,30 @@ fn check_undecodable_texture_is_an_error_even_by_default() {
 }
 
 #[test]
+fn check_ply_texture_error_names_the_ply_header_line() {
+    let dir = temp_dir("check-ply-texture");
+    let ply = write(
+        &dir,
+        "tri.ply",
+        "ply\nformat ascii 1.0\ncomment TextureFile tex.png\nelement vertex 3\nproperty float x\n\
+         property float y\nproperty float z\nelement face 1\nproperty list uchar int vertex_indices\n\
+         end_header\n0 0 0\n0.1 0 0\n0 0.1 0\n3 0 1 2\n",
+    );
+    let err = load_object_dir_checked(&dir, 1.0, MissingTextures::Fail).unwrap_err().to_string();
+    assert_eq!(
+        err,
+        format!(
+            "{}: texture {} named by {} does not exist; put the image there, or delete the \
+             `comment TextureFile` line from {} to render the material colour instead",
+            ply.display(),
+            dir.join("tex.png").display(),
+            ply.display(),
+            ply.display()
+        )
+    );
+}
+
+#[test]
 fn check_empty_mesh_is_named() {
     let dir = temp_dir("check-empty");
     let obj = write(&dir, "wire.obj", "v 0 0 0\nv 0.1 0 0\nv 0 0.1 0\nl 1 2\nl 2 3\n");

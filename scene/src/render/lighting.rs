@@ -8,10 +8,12 @@
 //! branch-free loops over those arrays (which the compiler vectorises), with
 //! only the shadow-map texel fetches scalar; a last pass encodes.
 
-use super::shading::{ENCODE_STEPS, luminance, sample, srgb_decode_table, srgb_encode_table, unit_to_u8};
+use super::shading::{
+    ENCODE_STEPS, luminance, sample, srgb_decode_table, srgb_encode_table, unit_to_u8, write_geometry,
+};
 use super::shadow::ShadowMap;
-use super::target::{NO_TRIANGLE, PixelBox, RenderTarget};
-use super::{IDENTITY3, ItemShading, RenderItem, RenderSettings, depth_to_u16, raster::NO_TEXTURE};
+use super::target::RenderTarget;
+use super::{IDENTITY3, ItemShading, RenderItem, RenderSettings, raster::NO_TEXTURE};
 use crate::{Intrinsics, Texture};
 
 /// A light as the row loops use it (camera frame, f32).
@@ -371,25 +373,9 @@ pub(super) fn resolve_lit(
         row.any_spec = false;
         for x in 0..width {
             let p = y * width + x;
-            let id = t.tri_id[p];
-            if id == NO_TRIANGLE {
-                t.rgb[p * 3..p * 3 + 3].copy_from_slice(&bg);
-                t.depth_m[p] = 0.0;
-                t.depth_u16[p] = 0;
-                t.labels[p] = 0;
-                t.reflectance[p] = 0;
-                t.specular[p] = 0;
-                continue;
-            }
-            let s = &t.tris[id as usize];
-            let z = 1.0 / t.inv_depth[p] as f64;
-            t.depth_m[p] = z as f32;
-            t.depth_u16[p] = depth_to_u16(z);
+            let Some(id) = write_geometry(t, items, bg, x, y) else { continue };
+            let s = &t.tris[id];
             let item = s.item as usize;
-            let cov = &mut t.coverage[item];
-            t.labels[p] = items[item].instance_label;
-            cov.visible_pixels += 1;
-            PixelBox::include(&mut cov.bbox, x as u32, y as u32);
 
             let a = s.attributes(x as f32, y as f32);
             let look = &looks[item];
@@ -416,7 +402,7 @@ pub(super) fn resolve_lit(
             row.m += 1;
             row.index[i] = p as u32;
             row.rx[i] = rx;
-            row.z[i] = z as f32;
+            row.z[i] = t.depth_m[p];
             for c in 0..3 {
                 row.albedo[c][i] = albedo[c];
                 row.n[c][i] = n[c];

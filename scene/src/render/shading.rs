@@ -187,6 +187,39 @@ pub(super) fn sample(dec: &[f32; 256], tex: &Texture, u: f32, v: f32, filter: Te
     }
 }
 
+/// Writes pixel `(x, y)`'s depth, label and coverage from the visibility
+/// buffers (background values where nothing covers it) and returns the index
+/// of the triangle seen there, if any. Shared by both shading paths.
+#[inline]
+pub(super) fn write_geometry(
+    t: &mut RenderTarget,
+    items: &[RenderItem<'_>],
+    bg: [u8; 3],
+    x: usize,
+    y: usize,
+) -> Option<usize> {
+    let p = y * t.width() as usize + x;
+    let id = t.tri_id[p];
+    if id == NO_TRIANGLE {
+        t.rgb[p * 3..p * 3 + 3].copy_from_slice(&bg);
+        t.depth_m[p] = 0.0;
+        t.depth_u16[p] = 0;
+        t.labels[p] = 0;
+        t.reflectance[p] = 0;
+        t.specular[p] = 0;
+        return None;
+    }
+    let item = t.tris[id as usize].item as usize;
+    let z = 1.0 / t.inv_depth[p] as f64;
+    t.depth_m[p] = z as f32;
+    t.depth_u16[p] = depth_to_u16(z);
+    t.labels[p] = items[item].instance_label;
+    let cov = &mut t.coverage[item];
+    cov.visible_pixels += 1;
+    PixelBox::include(&mut cov.bbox, x as u32, y as u32);
+    Some(id as usize)
+}
+
 /// Shades every pixel once and fills the output planes and per-item coverage.
 pub(super) fn resolve(
     items: &[RenderItem<'_>],
@@ -203,25 +236,8 @@ pub(super) fn resolve(
     for y in 0..height {
         for x in 0..width {
             let p = y * width + x;
-            let id = t.tri_id[p];
-            if id == NO_TRIANGLE {
-                t.rgb[p * 3..p * 3 + 3].copy_from_slice(&bg);
-                t.depth_m[p] = 0.0;
-                t.depth_u16[p] = 0;
-                t.labels[p] = 0;
-                t.reflectance[p] = 0;
-                t.specular[p] = 0;
-                continue;
-            }
-            let s = &t.tris[id as usize];
-            let z = 1.0 / t.inv_depth[p] as f64;
-            t.depth_m[p] = z as f32;
-            t.depth_u16[p] = depth_to_u16(z);
-            let item = s.item as usize;
-            let cov = &mut t.coverage[item];
-            t.labels[p] = items[item].instance_label;
-            cov.visible_pixels += 1;
-            PixelBox::include(&mut cov.bbox, x as u32, y as u32);
+            let Some(id) = write_geometry(t, items, bg, x, y) else { continue };
+            let s = &t.tris[id];
 
             let a = s.attributes(x as f32, y as f32);
             let lin = if s.texture != NO_TEXTURE {
