@@ -83,6 +83,34 @@ fn dot(a: &[f64; 3], b: &[f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+/// Mesh vertex `q` (object frame) in the camera frame `r q + t`, with its
+/// clip outcode ([`INVALID`] alone for a non-finite position); no lighting.
+#[inline]
+fn cam_vertex(
+    r: &nalgebra::Matrix3<f64>,
+    t: &nalgebra::Vector3<f64>,
+    q: &[f32; 3],
+    planes: &[[f64; 4]; 5],
+) -> CamVertex {
+    let q = [q[0] as f64, q[1] as f64, q[2] as f64];
+    let p = [
+        r[(0, 0)] * q[0] + r[(0, 1)] * q[1] + r[(0, 2)] * q[2] + t[0],
+        r[(1, 0)] * q[0] + r[(1, 1)] * q[1] + r[(1, 2)] * q[2] + t[1],
+        r[(2, 0)] * q[0] + r[(2, 1)] * q[1] + r[(2, 2)] * q[2] + t[2],
+    ];
+    let mut v = CamVertex { p, ..Default::default() };
+    if !p.iter().all(|c| c.is_finite()) {
+        v.outcode = INVALID;
+        return v;
+    }
+    for (b, pl) in planes.iter().enumerate() {
+        if plane_dist(pl, &p) < 0.0 {
+            v.outcode |= 1 << b;
+        }
+    }
+    v
+}
+
 /// Per-frame context shared by all triangles.
 struct Frame<'t> {
     k: Intrinsics,
@@ -167,21 +195,9 @@ fn rasterise_item<'a>(
     // Vertex pass: transform, outcode, light (front and back side).
     verts.clear();
     verts.extend(mesh.positions.iter().enumerate().map(|(i, q)| {
-        let q = [q[0] as f64, q[1] as f64, q[2] as f64];
-        let p = [
-            r[(0, 0)] * q[0] + r[(0, 1)] * q[1] + r[(0, 2)] * q[2] + t[0],
-            r[(1, 0)] * q[0] + r[(1, 1)] * q[1] + r[(1, 2)] * q[2] + t[1],
-            r[(2, 0)] * q[0] + r[(2, 1)] * q[1] + r[(2, 2)] * q[2] + t[2],
-        ];
-        let mut v = CamVertex { p, ..Default::default() };
-        if !p.iter().all(|c| c.is_finite()) {
-            v.outcode = INVALID;
+        let mut v = cam_vertex(r, &t, q, planes);
+        if v.outcode == INVALID {
             return v;
-        }
-        for (b, pl) in planes.iter().enumerate() {
-            if plane_dist(pl, &p) < 0.0 {
-                v.outcode |= 1 << b;
-            }
         }
         if has_normals {
             let m = mesh.normals[i];
@@ -471,25 +487,7 @@ pub(super) fn rasterise_depth(
         let r = rot.matrix();
         let t = pose.translation.vector;
         scratch.clear();
-        scratch.extend(item.mesh.positions.iter().map(|q| {
-            let q = [q[0] as f64, q[1] as f64, q[2] as f64];
-            let p = [
-                r[(0, 0)] * q[0] + r[(0, 1)] * q[1] + r[(0, 2)] * q[2] + t[0],
-                r[(1, 0)] * q[0] + r[(1, 1)] * q[1] + r[(1, 2)] * q[2] + t[1],
-                r[(2, 0)] * q[0] + r[(2, 1)] * q[1] + r[(2, 2)] * q[2] + t[2],
-            ];
-            let mut v = CamVertex { p, ..Default::default() };
-            if !p.iter().all(|c| c.is_finite()) {
-                v.outcode = INVALID;
-                return v;
-            }
-            for (b, pl) in planes.iter().enumerate() {
-                if plane_dist(pl, &p) < 0.0 {
-                    v.outcode |= 1 << b;
-                }
-            }
-            v
-        }));
+        scratch.extend(item.mesh.positions.iter().map(|q| cam_vertex(r, &t, q, &planes)));
         for tri in &item.mesh.triangles {
             let (v0, v1, v2) = (&scratch[tri[0] as usize], &scratch[tri[1] as usize], &scratch[tri[2] as usize]);
             let or = v0.outcode | v1.outcode | v2.outcode;
