@@ -55,6 +55,10 @@ pub fn render(camera: &str, s: &StatsSnapshot) -> String {
     if !invalid.is_empty() {
         out.push_str(&format!("invalid by reason: {}\n", invalid.join(", ")));
     }
+    out.push_str(&format!(
+        "degraded frames {}  objects shed for time {}  poses failing the depth check {}  non-finite poses {}  producer restarts {}\n",
+        s.frames_degraded, s.objects_shed, s.poses_failed_verification, s.poses_non_finite, s.producer_restarts
+    ));
     let names = Stage::timeline_names();
     for (title, table) in [
         ("since start".to_owned(), &s.since_start),

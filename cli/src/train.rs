@@ -120,6 +120,10 @@ pub struct Args {
     /// training default; `--single-instances` draws each class at most once.
     #[arg(long)]
     pub single_instances: bool,
+    /// With randomisation on, the share of training scenes drawn plain
+    /// (randomisation off, basic sensor) so accuracy on clean images holds.
+    #[arg(long, default_value_t = SamplerConfig::training().plain_share)]
+    pub plain_share: f64,
 }
 
 /// The training scene sampler the flags ask for: `SamplerConfig::training()`
@@ -131,8 +135,12 @@ pub fn training_sampler(args: &Args) -> SamplerConfig {
     if plain {
         return SamplerConfig::default();
     }
-    let mut s =
-        SamplerConfig { randomize: args.randomize, depth_sensor: args.depth_sensor, ..SamplerConfig::training() };
+    let mut s = SamplerConfig {
+        randomize: args.randomize,
+        depth_sensor: args.depth_sensor,
+        plain_share: args.plain_share,
+        ..SamplerConfig::training()
+    };
     if args.single_instances {
         s.instances_per_class = (1, 1);
         s.pair_probability = 0.0;

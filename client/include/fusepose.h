@@ -175,6 +175,9 @@ typedef struct fp_stats_snapshot {
     uint64_t producer_restarts;
     fp_latency_summary since_start[FUSEPOSE_TIMELINE_COUNT];
     fp_latency_summary last_window[FUSEPOSE_TIMELINE_COUNT];
+    uint64_t poses_failed_verification;
+    uint64_t objects_shed;
+    uint64_t frames_degraded;
 } fp_stats_snapshot;
 
 #ifdef __cplusplus

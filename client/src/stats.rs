@@ -114,6 +114,14 @@ pub struct StatsSnapshot {
     pub since_start: [LatencySummary; TIMELINE_COUNT],
     /// Per [`Stage`] then end-to-end, over `window_ns`.
     pub last_window: [LatencySummary; TIMELINE_COUNT],
+    /// Poses the depth check failed (`estimator.verify`): dropped with
+    /// `drop`, published without the VERIFIED flag with `flag`.
+    pub poses_failed_verification: u64,
+    /// Instances left without a pose because the frame's deadline did not
+    /// pay for them (the smallest of their frame; the message is DEGRADED).
+    pub objects_shed: u64,
+    /// Messages flagged DEGRADED.
+    pub frames_degraded: u64,
 }
 
 impl Default for StatsSnapshot {
@@ -137,6 +145,9 @@ impl Default for StatsSnapshot {
             producer_restarts: 0,
             since_start: [LatencySummary::default(); TIMELINE_COUNT],
             last_window: [LatencySummary::default(); TIMELINE_COUNT],
+            poses_failed_verification: 0,
+            objects_shed: 0,
+            frames_degraded: 0,
         }
     }
 }
@@ -209,6 +220,9 @@ mod tests {
             ("producer_restarts", offset_of!(StatsSnapshot, producer_restarts)),
             ("since_start", offset_of!(StatsSnapshot, since_start)),
             ("last_window", offset_of!(StatsSnapshot, last_window)),
+            ("poses_failed_verification", offset_of!(StatsSnapshot, poses_failed_verification)),
+            ("objects_shed", offset_of!(StatsSnapshot, objects_shed)),
+            ("frames_degraded", offset_of!(StatsSnapshot, frames_degraded)),
         ];
         let want: Vec<(String, usize)> = actual.iter().map(|(f, o)| (f.to_string(), *o)).collect();
         assert_eq!(fields, want, "PROTOCOL.md StatsSnapshot table vs the Rust type");

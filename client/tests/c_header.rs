@@ -57,7 +57,8 @@ fn layouts() -> Vec<Layout> {
         layout!(StatsSnapshot in "stats.rs" as "fp_stats_snapshot":
             format_version, _reserved, camera_id, uptime_ns, window_ns, deadline_ns, frames_received,
             frames_processed, frames_skipped_stale, frames_missed_sequence, frames_invalid, invalid_by_reason,
-            deadline_misses, estimator_failures, poses_non_finite, producer_restarts, since_start, last_window),
+            deadline_misses, estimator_failures, poses_non_finite, producer_restarts, since_start, last_window,
+            poses_failed_verification, objects_shed, frames_degraded),
     ]
 }
 

@@ -17,6 +17,12 @@ pub struct FrameCounters {
     pub producer_restarts: u64,
     /// Object poses with a NaN/infinite value, dropped instead of published.
     pub poses_non_finite: u64,
+    /// Poses the depth check failed (dropped or published unverified).
+    pub poses_failed_verification: u64,
+    /// Instances the deadline did not pay for.
+    pub objects_shed: u64,
+    /// Messages flagged DEGRADED.
+    pub frames_degraded: u64,
 }
 
 impl FrameCounters {

@@ -297,13 +297,17 @@ pub struct PoseEngine {
     verdicts: Vec<Verification>,
     /// Poses dropped by verification in the last frame.
     rejected: usize,
+    /// Poses that failed verification in the last frame (dropped or flagged).
+    failed_verification: usize,
+    /// Decaying maximum of the time spent after the estimate (verification), ns.
+    post_estimate_ns: f64,
     /// The segmenter's instance → class table for the current frame.
     instance_classes: Vec<u16>,
 }
 
 /// Checks each pose against the frame's depth and its instance mask into
-/// `verdicts` (same order); with `drop` removes the poses that fail and returns
-/// how many. No allocation.
+/// `verdicts` (same order) and returns how many failed; with `drop` removes
+/// those poses. No allocation.
 fn verify_poses(
     verifier: Option<&mut Verifier>,
     ws: Option<&Workspace>,
@@ -321,14 +325,13 @@ fn verify_poses(
         };
         verdicts.push(v);
     }
-    if !drop {
-        return 0;
+    let failed = verdicts.iter().filter(|v| !v.passed).count();
+    if drop {
+        let mut it = verdicts.iter();
+        poses.retain(|_| it.next().is_some_and(|v| v.passed));
+        verdicts.retain(|v| v.passed);
     }
-    let before = poses.len();
-    let mut it = verdicts.iter();
-    poses.retain(|_| it.next().is_some_and(|v| v.passed));
-    verdicts.retain(|v| v.passed);
-    before - poses.len()
+    failed
 }
 
 /// Stage durations of one frame, ns (0 = stage not run).
@@ -367,6 +370,8 @@ impl PoseEngine {
             verify_drop: spec.verify.as_ref().is_some_and(|v| v.2),
             verdicts: Vec::with_capacity(spec.workspace.max_instances),
             rejected: 0,
+            failed_verification: 0,
+            post_estimate_ns: 0.0,
             instance_classes: Vec::with_capacity(fusepose_estimator::seg::voting::MAX_INSTANCES + 1),
         })
     }
@@ -391,6 +396,8 @@ impl PoseEngine {
             verify_drop: false,
             verdicts: Vec::new(),
             rejected: 0,
+            failed_verification: 0,
+            post_estimate_ns: 0.0,
             instance_classes: Vec::new(),
         })
     }
@@ -441,7 +448,7 @@ impl PoseEngine {
         match result {
             Ok(()) => {
                 self.poses.retain_confident(self.min_confidence);
-                self.rejected = verify_poses(
+                self.failed_verification = verify_poses(
                     self.verifier.as_mut(),
                     self.workspace.as_ref(),
                     &mut self.poses,
@@ -449,6 +456,11 @@ impl PoseEngine {
                     self.verify_drop,
                     frame,
                 );
+                self.rejected = if self.verify_drop { self.failed_verification } else { 0 };
+                // Slow decay: a frame with many objects verifies longest, and
+                // the next such frame must not be planned without its cost.
+                let post = (fusepose_client::monotonic_ns() - t2) as f64;
+                self.post_estimate_ns = post.max(self.post_estimate_ns * 0.99);
                 Ok(())
             }
             Err(EstimateError::Frame(e)) => Err(EngineFailure::Refused(e)),
@@ -488,6 +500,21 @@ impl PoseEngine {
     /// Poses the last frame's verification dropped (`estimator.verify = "drop"`).
     pub fn rejected_by_verification(&self) -> usize {
         self.rejected
+    }
+
+    /// Time to keep free after the estimate for what follows it (verification), ns.
+    pub fn post_estimate_reserve_ns(&self) -> u64 {
+        self.post_estimate_ns as u64
+    }
+
+    /// Poses the last frame's verification failed (dropped or published unverified).
+    pub fn failed_verification(&self) -> usize {
+        self.failed_verification
+    }
+
+    /// Instances the last frame's deadline did not pay for (no pose).
+    pub fn shed(&self) -> usize {
+        self.estimator.as_ref().map_or(0, |e| e.shed())
     }
 
     /// Instances found in the last frame but not estimated (beyond capacity).

@@ -48,6 +48,12 @@ pub trait Estimator: Send {
     /// (the network: fewer refiner iterations, then fewer points).
     fn set_deadline(&mut self, _deadline: Option<std::time::Instant>) {}
 
+    /// Instances the last [`Estimator::estimate`] left without a pose because
+    /// its deadline did not pay for them (the smallest of the frame).
+    fn shed(&self) -> usize {
+        0
+    }
+
     /// Whether the last [`Estimator::estimate`] gave up accuracy to meet its deadline.
     fn degraded(&self) -> bool {
         false

@@ -1,7 +1,8 @@
 //! Deadline-aware network estimation on a rendered frame with the shipped
 //! weights: without a deadline every object gets the full refiner; with a
-//! deadline that cannot be met the frame degrades (no refiner, fewer points)
-//! and says so; a generous deadline gives the full plan back.
+//! deadline that cannot be met the frame degrades (no refiner, fewer points,
+//! only the largest instance) and says so; a generous deadline gives the full
+//! plan back.
 //! Skips (with a message) when models/builtin.safetensors is absent.
 
 use std::time::{Duration, Instant};
@@ -36,7 +37,7 @@ fn refiner_iterations_and_points_follow_the_deadline() {
     };
     let mut ws = Workspace::new(net.workspace_config(8)).unwrap();
     let found = ws.prepare(&frame, 1).unwrap();
-    assert!(found >= 1, "the scene shows objects");
+    assert!(found >= 2, "the scene shows several objects");
     let mut out = PoseSet::with_capacity(8);
     let full_points = net.workspace_config(8).num_points;
 
@@ -45,10 +46,13 @@ fn refiner_iterations_and_points_follow_the_deadline() {
     assert!(out.as_slice().iter().all(|p| p.iterations == 2), "{:?}", out.as_slice());
     assert!(!net.degraded());
 
-    // A deadline already (almost) over: no refiner, a quarter of the points, flagged.
+    // A deadline already (almost) over: no refiner, a quarter of the points,
+    // the largest instance only, flagged.
     net.set_deadline(Some(Instant::now() + Duration::from_micros(10)));
     net.estimate(&frame, &mut ws, &mut out).unwrap();
-    assert_eq!(out.len(), found, "every object still gets a pose");
+    assert_eq!(out.len(), 1, "only the largest instance is paid for");
+    assert_eq!(out.as_slice()[0].instance_id, 0);
+    assert_eq!(net.last_shed(), found - 1);
     assert!(out.as_slice().iter().all(|p| p.iterations == 0), "{:?}", out.as_slice());
     assert!(net.degraded());
     assert_eq!(net.last_plan().points, full_points.div_ceil(4));
@@ -60,6 +64,8 @@ fn refiner_iterations_and_points_follow_the_deadline() {
     assert!(out.as_slice().iter().all(|p| p.iterations == 2));
     assert!(!net.degraded());
     assert_eq!(net.last_plan().points, full_points);
+    assert_eq!(net.last_shed(), 0);
     let c = net.counters();
-    assert_eq!((c.objects, c.degraded_frames, c.reduced_point_objects), (3 * found as u64, 1, found as u64));
+    assert_eq!((c.objects, c.degraded_frames, c.reduced_point_objects), (2 * found as u64 + 1, 1, 1));
+    assert_eq!(c.shed_objects, found as u64 - 1);
 }

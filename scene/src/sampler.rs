@@ -81,6 +81,11 @@ pub struct SamplerConfig {
     pub heap_probability: f64,
     /// Copies in a heap, inclusive range (4, 8).
     pub heap_size: (usize, usize),
+    /// With randomisation on, the share of scenes (chosen by seed) drawn in
+    /// the original domain instead: `Randomize::Off` and the `Basic` sensor,
+    /// other settings kept (0). Keeps the plain-scene accuracy a randomised
+    /// retraining would otherwise trade away.
+    pub plain_share: f64,
 }
 
 impl Default for SamplerConfig {
@@ -107,6 +112,7 @@ impl Default for SamplerConfig {
             pair_gap_m: (0.0, 0.003),
             heap_probability: 0.0,
             heap_size: (4, 8),
+            plain_share: 0.0,
         }
     }
 }
@@ -130,6 +136,7 @@ impl SamplerConfig {
             instances_per_class: (1, 2),
             pair_probability: 0.35,
             heap_probability: 0.15,
+            plain_share: 0.25,
             ..SamplerConfig::default()
         }
     }
@@ -292,6 +299,9 @@ impl SamplerConfig {
         if !(g0 >= 0.0 && g1 >= g0 && g1 < 0.1) {
             return Err(E("pair_gap_m must be 0 <= min <= max < 0.1"));
         }
+        if !(0.0..=1.0).contains(&self.plain_share) {
+            return Err(E("plain_share must be within 0..=1"));
+        }
         if let Some((lo, hi)) = self.target_occlusion {
             if !(0.0..=1.0).contains(&lo) || !(lo..=1.0).contains(&hi) {
                 return Err(E("target_occlusion must be 0 <= lo <= hi <= 1"));
@@ -309,6 +319,15 @@ pub fn sample_scene(set: &ObjectSet, cfg: &SamplerConfig, seed: u64) -> Result<S
     cfg.validate()?;
     if set.is_empty() {
         return Err(SamplerError::EmptyObjectSet);
+    }
+    if cfg.randomize.is_on() && plain_draw(seed) < cfg.plain_share {
+        let plain = SamplerConfig {
+            randomize: Randomize::Off,
+            depth_sensor: DepthSensor::Basic,
+            plain_share: 0.0,
+            ..cfg.clone()
+        };
+        return sample_scene(set, &plain, seed);
     }
     let mut rng = Pcg64Mcg::seed_from_u64(seed);
     if cfg.randomize.is_on() {
@@ -334,6 +353,13 @@ pub fn sample_scene(set: &ObjectSet, cfg: &SamplerConfig, seed: u64) -> Result<S
         depth_sensor: cfg.depth_sensor,
         extras: randomization::SceneExtras::default(),
     })
+}
+
+/// A uniform draw in [0, 1) from `seed` alone, so choosing plain scenes does
+/// not shift any other draw of the scene.
+fn plain_draw(seed: u64) -> f64 {
+    let mut rng = Pcg64Mcg::seed_from_u64(seed ^ 0x706c_6169_6e5f_7368);
+    rng.random::<f64>()
 }
 
 /// Draws `count` camera views of `objects` (see [`SamplerConfig`]); with

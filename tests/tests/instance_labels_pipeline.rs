@@ -4,7 +4,8 @@
 //! the built-in objects) estimates it, and this process receives the pose
 //! message: one pose per instance, with distinct instance ids and the
 //! `FROM_INSTANCE_LABELS` flag. The same frame with class labels gives one
-//! region, so one pose: only the instance plane tells the two apart.
+//! region, so one pose: only the instance plane tells the two apart. The
+//! daemon's stats count every pose that failed the depth check.
 
 use std::time::Duration;
 
@@ -41,7 +42,9 @@ fn scene_poses(width_m: f64) -> [Pose; 2] {
 #[test]
 fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> {
     let env = TestEnv::new("instances")?;
-    let config = env.write_daemon_config("kind = \"icp\"\nmax_instances = 8\nmin_pixels = 50")?;
+    let config = env.write_daemon_config(
+        "kind = \"icp\"\nmax_instances = 8\nmin_pixels = 50\nverify = \"flag\"\nverify_min_fit = 0.999",
+    )?;
     let _daemon = start_daemon(&env, &config)?;
 
     let objects = fusepose_scene::builtin::builtin_objects();
@@ -89,9 +92,9 @@ fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> 
     id_plane.copy_from_slice(ids);
     classes.copy_from_slice(&[0, CLASS, CLASS]);
     let sequence = frame.send()?;
-    let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
-    assert!(msg.is_ok(), "status {:#x}, reason {:?}", msg.status, msg.invalid());
-    let poses = msg.objects();
+    let first = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
+    assert!(first.is_ok(), "status {:#x}, reason {:?}", first.status, first.invalid());
+    let poses = first.objects();
     assert_eq!(poses.len(), 2, "one pose per instance: {poses:?}");
     assert_ne!(poses[0].instance_id, poses[1].instance_id);
     let mut matched = [false; 2];
@@ -137,6 +140,14 @@ fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> 
     assert_eq!(msg.object_count, 1, "class labels merge the touching pair: {:?}", msg.objects());
     assert_eq!(msg.objects()[0].flags & PoseFlags::FROM_INSTANCE_LABELS, 0);
     check_verification_fields(&msg.objects()[0]);
+
+    // `verify = "flag"` with a fit few poses reach (0.999): failing poses are
+    // published without VERIFIED, and the stats count each one.
+    let unverified = [&first, &msg].iter().flat_map(|m| m.objects()).filter(|o| !o.is_verified()).count();
+    assert!(unverified >= 1, "a fit of 0.999 fails some of the 3 poses");
+    let stats = query_stats(&env, Duration::from_secs(5))?;
+    assert_eq!(stats.poses_failed_verification, unverified as u64, "{stats:?}");
+    assert_eq!((stats.objects_shed, stats.frames_degraded), (0, 0), "{stats:?}");
     Ok(())
 }
 

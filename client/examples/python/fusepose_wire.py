@@ -171,7 +171,7 @@ class LatencySummary(ctypes.Structure):
 
 
 class StatsSnapshot(ctypes.Structure):
-    """The daemon's counters and latency percentiles for one camera (1008 bytes, alignment 8)."""
+    """The daemon's counters and latency percentiles for one camera (1032 bytes, alignment 8)."""
 
     _fields_ = [
         ("format_version", ctypes.c_uint16),
@@ -192,6 +192,9 @@ class StatsSnapshot(ctypes.Structure):
         ("producer_restarts", ctypes.c_uint64),
         ("since_start", LatencySummary * len(TIMELINES)),
         ("last_window", LatencySummary * len(TIMELINES)),
+        ("poses_failed_verification", ctypes.c_uint64),
+        ("objects_shed", ctypes.c_uint64),
+        ("frames_degraded", ctypes.c_uint64),
     ]
 
     @staticmethod
@@ -216,8 +219,9 @@ _check(PoseMessage, 2912, 8, {"status": 4, "frame_sequence": 16, "published_time
                               "stage_ns": 48, "objects": 96})
 _check(StatsRequest, 8, 2, {"_reserved": 2})
 _check(LatencySummary, 48, 8, {"max_ns": 40})
-_check(StatsSnapshot, 1008, 8, {"frames_received": 32, "invalid_by_reason": 72, "deadline_misses": 304,
-                                "producer_restarts": 328, "since_start": 336, "last_window": 672})
+_check(StatsSnapshot, 1032, 8, {"frames_received": 32, "invalid_by_reason": 72, "deadline_misses": 304,
+                                "producer_restarts": 328, "since_start": 336, "last_window": 672,
+                                "poses_failed_verification": 1008, "objects_shed": 1016, "frames_degraded": 1024})
 
 
 def align8(n: int) -> int:

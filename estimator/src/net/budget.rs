@@ -1,7 +1,8 @@
 //! Deadline-aware degradation of the network estimator: a cost model learned
 //! from the frames themselves, and the plan for one frame — as many refiner
 //! iterations as the remaining time allows (0..max), and when even the pose
-//! net alone does not fit, fewer points per object.
+//! net alone does not fit, fewer points per object; when even that does not
+//! fit every instance, only the largest ones (see [`affordable`]).
 //!
 //! Costs are per object on one thread, ns, at the full N points; the pose net
 //! and the refiner scale with the points used, the colour CNN does not.
@@ -67,6 +68,20 @@ impl CostModel {
         }
     }
 
+    /// One object's colour CNN and pose net at `points` of `full_points`, ns
+    /// (0 before both were measured).
+    pub fn object_ns(&self, points: usize, full_points: usize) -> f64 {
+        match (self.color_ns, self.pose_ns) {
+            (Some(c), Some(p)) => c + p * points as f64 / full_points.max(1) as f64,
+            _ => 0.0,
+        }
+    }
+
+    /// The refiner's colour features at `points` of `full_points`, ns (0 before measured).
+    pub fn refine_setup_ns(&self, points: usize, full_points: usize) -> f64 {
+        self.refine_setup_ns.unwrap_or(0.0) * points as f64 / full_points.max(1) as f64
+    }
+
     /// One refiner iteration at `points` of `full_points`, ns (0 before any was measured).
     pub fn refine_iter_ns(&self, points: usize, full_points: usize) -> f64 {
         self.refine_iter_ns.unwrap_or(0.0) * points as f64 / full_points.max(1) as f64
@@ -126,9 +141,34 @@ pub fn plan(
     FramePlan { refine_iterations: 0, points }
 }
 
-/// Whether one more refiner iteration of `iter_ns` still ends before `deadline`.
-pub fn iteration_fits(deadline: Option<Instant>, iter_ns: f64) -> bool {
-    deadline.is_none_or(|d| Instant::now() + Duration::from_nanos(iter_ns as u64) <= d)
+/// How many of a frame's `count` instances (largest first) the remaining time
+/// pays for at the cheapest plan (pose net on a quarter of the points, no
+/// refiner) on `threads` threads: all of them without a deadline or before
+/// costs are known, otherwise as many as fit, but at least one. The rest get
+/// no pose this frame: a segmenter that finds more regions than the budget
+/// holds (clutter, or regions of an unfamiliar camera) would otherwise make
+/// every frame late.
+pub fn affordable(model: &CostModel, remaining: Option<Duration>, count: usize, threads: usize) -> usize {
+    let (Some(remaining), Some(color), Some(pose)) = (remaining, model.color_ns, model.pose_ns) else {
+        return count;
+    };
+    let cheapest = color + pose * MIN_POINT_FRACTION;
+    if count == 0 || cheapest <= 0.0 {
+        return count;
+    }
+    let per_thread = (remaining.as_nanos() as f64 * FILL / cheapest).floor() as usize;
+    per_thread.saturating_mul(threads.max(1)).clamp(1, count)
+}
+
+/// Safety factor on a step's average cost when deciding, just before it,
+/// whether it still ends before the deadline: single steps vary (the other
+/// thread, cache misses, the scheduler) and one that overruns makes the frame late.
+const STEP_MARGIN: f64 = 1.25;
+
+/// Whether a step of average cost `cost_ns` (a refiner iteration, an
+/// object's pose net) started now still ends before `deadline`.
+pub fn step_fits(deadline: Option<Instant>, cost_ns: f64) -> bool {
+    deadline.is_none_or(|d| Instant::now() + Duration::from_nanos((cost_ns * STEP_MARGIN) as u64) <= d)
 }
 
 #[cfg(test)]
@@ -168,6 +208,20 @@ mod tests {
         assert_eq!(plan(&model(), ms(0.1), 2, 4, 256), FramePlan { refine_iterations: 0, points: 64 });
         assert!(plan(&model(), ms(6.0), 2, 4, 256).is_degraded(4, 256));
         assert!(!plan(&model(), ms(100.0), 2, 4, 256).is_degraded(4, 256));
+    }
+
+    #[test]
+    fn instances_beyond_the_cheapest_plan_are_shed() {
+        let ms = |x: f64| Some(Duration::from_secs_f64(x / 1e3));
+        // Cheapest object: 1 + 2 / 4 = 1.5 ms; 0.85 * 10 ms holds 5 per thread.
+        assert_eq!(affordable(&model(), ms(10.0), 12, 1), 5);
+        assert_eq!(affordable(&model(), ms(10.0), 12, 2), 10);
+        assert_eq!(affordable(&model(), ms(10.0), 4, 2), 4);
+        // Hopeless still keeps the largest instance; no deadline or costs keep all.
+        assert_eq!(affordable(&model(), ms(0.0), 6, 2), 1);
+        assert_eq!(affordable(&model(), None, 6, 2), 6);
+        assert_eq!(affordable(&CostModel::default(), ms(0.0), 6, 2), 6);
+        assert_eq!(affordable(&model(), ms(0.0), 0, 2), 0);
     }
 
     #[test]

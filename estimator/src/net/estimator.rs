@@ -57,6 +57,12 @@ struct FrameJob<'a> {
     deadline: Option<Instant>,
     /// Estimated cost of one refiner iteration at the plan's points, ns.
     iter_ns: f64,
+    /// Estimated cost of one object's colour CNN and pose net at the plan's
+    /// points, ns: an instance that would start later than this before the
+    /// deadline is shed (see [`admitted`]).
+    object_ns: f64,
+    /// Estimated cost of the refiner's colour features at the plan's points, ns.
+    setup_ns: f64,
     fit: Option<&'a FitCheck>,
     max_fit_m: f64,
     tracking_iterations: usize,
@@ -89,7 +95,7 @@ fn refine_loop(
     job: &FrameJob<'_>,
 ) -> usize {
     let mut done = 0;
-    while done < iterations && budget::iteration_fits(job.deadline, job.iter_ns) {
+    while done < iterations && budget::step_fits(job.deadline, job.iter_ns) {
         (*rot, *t) = engine.refine(sc, k, rot, t);
         done += 1;
     }
@@ -97,6 +103,63 @@ fn refine_loop(
 }
 
 /// Runs instance `i` of `ws` through the network (from `prior` when tracking).
+/// Whether instance `i` may still start: the largest (0) always does; any
+/// other only while its colour CNN and pose net end before the deadline. The
+/// plan is made from average costs; this check at each start keeps a frame
+/// whose objects run slower than average from overrunning.
+fn admitted(i: usize, job: &FrameJob<'_>) -> bool {
+    i == 0 || budget::step_fits(job.deadline, job.object_ns)
+}
+
+impl FrameJob<'_> {
+    /// This job with its step costs scaled to the speed one object of this
+    /// frame actually ran at, when slower than the cost model: a frame can run
+    /// at half the average speed (a shared machine), and its later admission
+    /// and iteration checks must know.
+    fn at_speed_of(&self, t: &ObjectTimes) -> Self {
+        if t.pose.is_zero() || self.object_ns <= 0.0 {
+            return *self;
+        }
+        let s = ((t.color + t.pose).as_nanos() as f64 / self.object_ns).max(1.0);
+        FrameJob { object_ns: self.object_ns * s, setup_ns: self.setup_ns * s, iter_ns: self.iter_ns * s, ..*self }
+    }
+}
+
+/// Runs instances `first, first + 2, …` below `count` on one thread into `out`,
+/// each admitted (or shed) at the speed the thread's previous object ran at.
+#[allow(clippy::too_many_arguments)]
+fn run_share(
+    engine: &Engine,
+    sc: &mut Scratch,
+    ws: &Workspace,
+    priors: &[Option<Prior>],
+    first: usize,
+    count: usize,
+    job: &FrameJob<'_>,
+    out: &mut Vec<Option<InstanceResult>>,
+) {
+    let mut local = *job;
+    for i in (first..count).step_by(2) {
+        let r = estimate_admitted(engine, sc, ws, i, priors[i], &local);
+        if let Some(r) = &r {
+            local = job.at_speed_of(&r.times);
+        }
+        out.push(r);
+    }
+}
+
+/// [`estimate_instance`] when the instance is [`admitted`], else `None` (shed).
+fn estimate_admitted(
+    engine: &Engine,
+    sc: &mut Scratch,
+    ws: &Workspace,
+    i: usize,
+    prior: Option<Prior>,
+    job: &FrameJob<'_>,
+) -> Option<InstanceResult> {
+    admitted(i, job).then(|| estimate_instance(engine, sc, ws, i, prior, job))
+}
+
 fn estimate_instance(
     engine: &Engine,
     sc: &mut Scratch,
@@ -148,7 +211,8 @@ fn estimate_instance(
     let mut rot = quat_matrix(q);
     let mut t = Vector3::new(sc.trans[[best, 0]], sc.trans[[best, 1]], sc.trans[[best, 2]]);
     let mut done = 0;
-    if job.plan.refine_iterations > 0 && budget::iteration_fits(job.deadline, job.iter_ns) {
+    let setup_ns = if refine_ready { 0.0 } else { job.setup_ns };
+    if job.plan.refine_iterations > 0 && budget::step_fits(job.deadline, setup_ns + job.iter_ns) {
         if !refine_ready {
             engine.refine_color(sc);
             times.refine_setup = since(&mut clock);
@@ -200,9 +264,13 @@ struct Task {
     ws: *const Workspace,
     /// Tracking priors per instance (same length as the instances).
     priors: *const [Option<Prior>],
+    /// Instances estimated this frame: the first `count` (the largest).
+    count: usize,
     plan: FramePlan,
     deadline: Option<Instant>,
     iter_ns: f64,
+    object_ns: f64,
+    setup_ns: f64,
     max_fit_m: f64,
     tracking_iterations: usize,
     check_fit: bool,
@@ -258,7 +326,7 @@ impl<T> Slot<T> {
 struct Shared {
     msg: Slot<Msg>,
     done: Slot<bool>,
-    results: Mutex<Vec<InstanceResult>>,
+    results: Mutex<Vec<Option<InstanceResult>>>,
 }
 
 struct Worker {
@@ -297,15 +365,16 @@ impl Worker {
                                     plan: task.plan,
                                     deadline: task.deadline,
                                     iter_ns: task.iter_ns,
+                                    object_ns: task.object_ns,
+                                    setup_ns: task.setup_ns,
                                     fit: fit.as_deref().filter(|_| task.check_fit),
                                     max_fit_m: task.max_fit_m,
                                     tracking_iterations: task.tracking_iterations,
                                 };
                                 let mut out = sh.results.lock().unwrap_or_else(|e| e.into_inner());
                                 out.clear();
-                                for i in (1..ws.instances.len()).step_by(2) {
-                                    out.push(estimate_instance(&engine, &mut sc, ws, i, priors[i], &job));
-                                }
+                                let count = task.count.min(ws.instances.len());
+                                run_share(&engine, &mut sc, ws, priors, 1, count, &job, &mut out);
                             }))
                             .is_ok();
                             sh.done.put(ok);
@@ -366,6 +435,9 @@ pub struct NetCounters {
     pub degraded_frames: u64,
     /// Objects run on fewer than N points.
     pub reduced_point_objects: u64,
+    /// Instances left without a pose because the deadline did not pay for
+    /// them (the smallest of their frame; see [`budget::affordable`]).
+    pub shed_objects: u64,
 }
 
 /// The fusion-network estimator.
@@ -376,13 +448,14 @@ pub struct NetEstimator {
     worker: Option<Worker>,
     /// Sizes the buffers were made for: (N, S, max instances).
     sizes: (usize, usize, usize),
-    mine: Vec<InstanceResult>,
+    mine: Vec<Option<InstanceResult>>,
     refine_iterations: usize,
     frame_cap: Option<usize>,
     deadline: Option<Instant>,
     costs: CostModel,
     last_plan: FramePlan,
     last_degraded: bool,
+    last_shed: usize,
     tracks: Option<Tracks>,
     fit: Option<Arc<FitCheck>>,
     priors: Vec<Option<Prior>>,
@@ -425,6 +498,7 @@ impl NetEstimator {
             costs: CostModel::default(),
             last_plan: FramePlan::full(refine_iterations, n),
             last_degraded: false,
+            last_shed: 0,
             tracks,
             fit,
             priors: Vec::with_capacity(cap),
@@ -478,6 +552,11 @@ impl NetEstimator {
         self.last_plan
     }
 
+    /// Instances the last frame left without a pose for lack of time.
+    pub fn last_shed(&self) -> usize {
+        self.last_shed
+    }
+
     /// The learned per-object stage costs.
     pub fn costs(&self) -> &CostModel {
         &self.costs
@@ -526,8 +605,20 @@ impl NetEstimator {
         }
     }
 
-    /// Folds one frame's results into the costs, counters and tracks; writes the poses.
-    fn absorb(&mut self, result: &InstanceResult, out: &mut PoseSet) {
+    /// The frame gave up accuracy when its plan did or an instance was shed.
+    fn finish_frame(&mut self, plan_degraded: bool) {
+        self.last_degraded = plan_degraded || self.last_shed > 0;
+        self.counters.degraded_frames += self.last_degraded as u64;
+    }
+
+    /// Folds one frame's results into the costs, counters and tracks; writes
+    /// the poses. `None`: the instance was shed at its start.
+    fn absorb(&mut self, result: Option<&InstanceResult>, out: &mut PoseSet) {
+        let Some(result) = result else {
+            self.last_shed += 1;
+            self.counters.shed_objects += 1;
+            return;
+        };
         self.costs.observe(&result.times);
         self.counters.objects += 1;
         self.counters.tracked += result.outcome.tracked as u64;
@@ -556,6 +647,10 @@ impl Estimator for NetEstimator {
         self.last_degraded
     }
 
+    fn shed(&self) -> usize {
+        self.last_shed
+    }
+
     fn estimate(&mut self, _frame: &FrameView<'_>, ws: &mut Workspace, out: &mut PoseSet) -> Result<(), EstimateError> {
         out.clear();
         let max_iterations = self.frame_cap.take().map_or(self.refine_iterations, |c| c.min(self.refine_iterations));
@@ -565,22 +660,35 @@ impl Estimator for NetEstimator {
             return Err(EstimateError::UnknownClass(bad.class_id));
         }
         self.fit(ws);
-        let count = ws.instances.len();
+        let found = ws.instances.len();
         let ws: &Workspace = ws;
         self.gather_priors(ws);
+        let remaining = deadline.map(|d| d.saturating_duration_since(Instant::now()));
+        let count = budget::affordable(&self.costs, remaining, found, if found >= 2 { self.threads() } else { 1 });
+        self.last_shed = found - count;
+        self.counters.shed_objects += self.last_shed as u64;
         let threads = if count >= 2 { self.threads() } else { 1 };
         let full_points = self.scratch.points();
-        let remaining = deadline.map(|d| d.saturating_duration_since(Instant::now()));
         let plan = budget::plan(&self.costs, remaining, count.div_ceil(threads), max_iterations, full_points);
         self.last_plan = plan;
-        self.last_degraded = plan.is_degraded(max_iterations, full_points);
-        self.counters.degraded_frames += self.last_degraded as u64;
+        let plan_degraded = plan.is_degraded(max_iterations, full_points);
         let tracking = self.tracks.as_ref().map(|t| *t.config());
         let (max_fit_m, tracking_iterations) =
             tracking.map_or((f64::NAN, 0), |t| (t.max_fit_m, t.refine_iterations.max(1)));
         let iter_ns = self.costs.refine_iter_ns(plan.points, full_points);
         let fit = self.fit.clone();
-        let job = FrameJob { plan, deadline, iter_ns, fit: fit.as_deref(), max_fit_m, tracking_iterations };
+        let object_ns = self.costs.object_ns(plan.points, full_points);
+        let setup_ns = self.costs.refine_setup_ns(plan.points, full_points);
+        let job = FrameJob {
+            plan,
+            deadline,
+            iter_ns,
+            object_ns,
+            setup_ns,
+            fit: fit.as_deref(),
+            max_fit_m,
+            tracking_iterations,
+        };
         self.mine.clear();
         let mut mine = std::mem::take(&mut self.mine);
         if threads == 2
@@ -589,26 +697,28 @@ impl Estimator for NetEstimator {
             w.shared.msg.put(Msg::Run(Task {
                 ws,
                 priors: self.priors.as_slice(),
+                count,
                 plan,
                 deadline,
                 iter_ns,
+                object_ns,
+                setup_ns,
                 max_fit_m,
                 tracking_iterations,
                 check_fit: job.fit.is_some(),
             }));
             let guard = WaitGuard { shared: &w.shared, ok: None };
-            for i in (0..count).step_by(2) {
-                mine.push(estimate_instance(&self.engine, &mut self.scratch, ws, i, self.priors[i], &job));
-            }
+            run_share(&self.engine, &mut self.scratch, ws, &self.priors, 0, count, &job, &mut mine);
             let ok = guard.wait();
             let shared = w.shared.clone();
             let theirs = shared.results.lock().unwrap_or_else(|e| e.into_inner());
             if ok && theirs.len() == count / 2 {
                 for i in 0..count {
                     let r = if i % 2 == 0 { mine[i / 2] } else { theirs[i / 2] };
-                    self.absorb(&r, out);
+                    self.absorb(r.as_ref(), out);
                 }
                 self.mine = mine;
+                self.finish_frame(plan_degraded);
                 return Ok(());
             }
             // The worker panicked: this frame and later ones run on the caller's thread.
@@ -617,11 +727,69 @@ impl Estimator for NetEstimator {
             out.clear();
             mine.clear();
         }
+        let mut local = job;
         for i in 0..count {
-            let r = estimate_instance(&self.engine, &mut self.scratch, ws, i, self.priors[i], &job);
-            self.absorb(&r, out);
+            let r = estimate_admitted(&self.engine, &mut self.scratch, ws, i, self.priors[i], &local);
+            if let Some(r) = &r {
+                local = job.at_speed_of(&r.times);
+            }
+            self.absorb(r.as_ref(), out);
         }
         self.mine = mine;
+        self.finish_frame(plan_degraded);
         Ok(())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn job(deadline: Option<Instant>, object_ns: f64) -> FrameJob<'static> {
+        FrameJob {
+            plan: FramePlan::full(2, 256),
+            deadline,
+            iter_ns: 0.0,
+            object_ns,
+            setup_ns: 0.0,
+            fit: None,
+            max_fit_m: f64::NAN,
+            tracking_iterations: 0,
+        }
+    }
+
+    #[test]
+    fn instances_start_only_while_their_cost_fits_the_deadline() {
+        let now = Instant::now();
+        let soon = job(Some(now + Duration::from_millis(5)), 8e6);
+        assert!(admitted(0, &soon), "the largest instance always runs");
+        assert!(!admitted(1, &soon) && !admitted(5, &soon), "8 ms of work does not fit 5 ms");
+        assert!(
+            !admitted(1, &job(Some(now + Duration::from_millis(5)), 4.5e6)),
+            "4.5 ms with its margin does not fit 5 ms"
+        );
+        let later = job(Some(now + Duration::from_millis(50)), 8e6);
+        assert!(admitted(1, &later) && admitted(5, &later));
+        assert!(admitted(3, &job(None, 8e6)), "no deadline: every instance");
+        assert!(admitted(3, &job(Some(now + Duration::from_millis(1)), 0.0)), "no costs yet: every instance");
+    }
+
+    #[test]
+    fn a_slow_object_slows_the_rest_of_its_frame() {
+        let planned = FrameJob { iter_ns: 0.5e6, setup_ns: 0.1e6, ..job(None, 4e6) };
+        let ran = |ms: u64| ObjectTimes {
+            color: Duration::from_millis(ms / 2),
+            pose: Duration::from_millis(ms / 2),
+            ..ObjectTimes::default()
+        };
+        let slow = planned.at_speed_of(&ran(8));
+        assert_eq!((slow.object_ns, slow.iter_ns, slow.setup_ns), (8e6, 1e6, 0.2e6));
+        let fast = planned.at_speed_of(&ran(2));
+        assert_eq!(fast.object_ns, 4e6, "never faster than the model");
+        let tracked = ObjectTimes { pose: Duration::ZERO, ..ran(8) };
+        assert_eq!(planned.at_speed_of(&tracked).object_ns, 4e6, "no pose net ran: no measurement");
+        // At twice the speed model, 8 ms of work no longer fits 9 ms.
+        let soon = FrameJob { deadline: Some(Instant::now() + Duration::from_millis(9)), ..planned };
+        assert!(admitted(1, &soon) && !admitted(1, &soon.at_speed_of(&ran(8))));
     }
 }

@@ -368,7 +368,7 @@ fn ideal(k: &Intrinsics, randomize: Randomize) -> ViewOptions {
 #[test]
 fn training_scenes_and_frames_are_deterministic() {
     let set = box_set();
-    let cfg = SamplerConfig { views: 2, ..SamplerConfig::training() };
+    let cfg = SamplerConfig { views: 2, plain_share: 0.0, ..SamplerConfig::training() };
     let k = k_quarter();
     let a = sample_scene(&set, &cfg, 21).unwrap();
     let b = sample_scene(&set, &cfg, 21).unwrap();
@@ -425,7 +425,7 @@ fn off_and_basic_options_reproduce_render_view() {
 #[test]
 fn jittered_intrinsics_are_the_ones_used_and_reported() {
     let set = box_set();
-    let cfg = SamplerConfig { views: 3, ..SamplerConfig::training() };
+    let cfg = SamplerConfig { views: 3, plain_share: 0.0, ..SamplerConfig::training() };
     let k = k_quarter();
     let mut t = RenderTarget::for_intrinsics(&k);
     let mut checked = 0;
@@ -461,7 +461,7 @@ fn jittered_intrinsics_are_the_ones_used_and_reported() {
 #[test]
 fn distractors_are_background_and_never_in_the_truth() {
     let set = box_set();
-    let cfg = SamplerConfig { views: 2, ..SamplerConfig::training() };
+    let cfg = SamplerConfig { views: 2, plain_share: 0.0, ..SamplerConfig::training() };
     let k = k_quarter();
     let mut t = RenderTarget::for_intrinsics(&k);
     let mut probe = RenderTarget::for_intrinsics(&k);
@@ -665,7 +665,7 @@ fn pair_and_heap_copies_touch() {
 #[test]
 fn training_cameras_span_grazing_to_top_down_and_cut_objects_at_edges() {
     let set = box_set();
-    let cfg = SamplerConfig { views: 4, ..SamplerConfig::training() };
+    let cfg = SamplerConfig { views: 4, plain_share: 0.0, ..SamplerConfig::training() };
     let k = cfg.intrinsics;
     let (mut grazing, mut top_down, mut near, mut far, mut cut, mut frames) = (0, 0, 0, 0, 0, 0);
     for seed in 0..30 {
@@ -700,4 +700,34 @@ fn training_cameras_span_grazing_to_top_down_and_cut_objects_at_edges() {
     assert!(grazing > 3 && top_down > 3, "grazing {grazing}, top-down {top_down} of {frames}");
     assert!(near > 3 && far > 3, "near {near}, far {far}");
     assert!(cut * 5 > frames, "objects at the image edge in only {cut} of {frames} views");
+}
+
+#[test]
+fn plain_share_draws_that_share_of_scenes_in_the_original_domain() {
+    let set = box_set();
+    let mixed = SamplerConfig { plain_share: 0.25, ..SamplerConfig::training() };
+    let all_random = SamplerConfig { plain_share: 0.0, ..SamplerConfig::training() };
+    let plain_cfg = SamplerConfig { randomize: Randomize::Off, depth_sensor: DepthSensor::Basic, ..mixed.clone() };
+    let mut plain = 0;
+    for seed in 0..200u64 {
+        let s = sample_scene(&set, &mixed, 4000 + seed).unwrap();
+        if s.randomize == Randomize::Off {
+            plain += 1;
+            assert_eq!(s.depth_sensor, DepthSensor::Basic);
+            assert!(s.extras.distractors.is_empty());
+            // Exactly the scene the un-randomised sampler draws for this seed.
+            let p = sample_scene(&set, &plain_cfg, 4000 + seed).unwrap();
+            assert_eq!((s.objects, s.views), (p.objects, p.views));
+        } else {
+            // Scenes not chosen are unchanged by the share.
+            let r = sample_scene(&set, &all_random, 4000 + seed).unwrap();
+            assert_eq!((s.objects, s.views, s.lighting), (r.objects, r.views, r.lighting));
+            assert_eq!(s.depth_sensor, DepthSensor::StructuredLight);
+        }
+    }
+    assert!((35..=65).contains(&plain), "{plain} of 200 scenes plain at share 0.25");
+    assert!(matches!(
+        SamplerConfig { plain_share: 1.5, ..SamplerConfig::training() }.validate(),
+        Err(SamplerError::InvalidConfig(_))
+    ));
 }

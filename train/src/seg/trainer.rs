@@ -137,8 +137,9 @@ fn hyper_json(cfg: &SegTrainConfig, weights: &[f32]) -> serde_json::Value {
         "offsets": cfg.offsets,
         "offset_weight": cfg.offset_weight,
         "data": format!(
-            "scene sampler (randomize {}, depth sensor {}, copies per class {:?}, pairs {}, heaps {}), rendered on the fly",
+            "scene sampler (randomize {}, plain share {}, depth sensor {}, copies per class {:?}, pairs {}, heaps {}), rendered on the fly",
             cfg.sampler.randomize,
+            cfg.sampler.plain_share,
             cfg.sampler.depth_sensor,
             cfg.sampler.instances_per_class,
             cfg.sampler.pair_probability,
