@@ -12,6 +12,8 @@
 //!   given frame rates: latency, achieved FPS, skipped and late frames.
 //! - [`tracking`]: the network with and without tracking mode on rendered
 //!   videos: time per object, poses/s, accuracy, allocations.
+//! - [`ros2_bridges`]: latency and CPU of the ROS 2 bridges (DDS in, DDS out)
+//!   around a real daemon, this process playing the ROS 2 graph.
 //! - [`alloc_count`]: the counting global allocator the binary installs.
 //! - [`cpu_time`]: the calling thread's CPU time, beside wall time.
 //! - [`summary`]: median / p90 / p99 of a sample.
@@ -24,6 +26,7 @@ pub mod e2e;
 pub mod estimator;
 pub mod latency;
 pub mod loadavg;
+pub mod ros2_bridges;
 pub mod summary;
 pub mod tracking;
 pub mod transport;

@@ -5,6 +5,7 @@ use clap::{Parser, Subcommand};
 use fusepose_bench::alloc_count::CountingAlloc;
 use fusepose_bench::e2e::{self, E2eArgs};
 use fusepose_bench::estimator::{self, EstimatorArgs};
+use fusepose_bench::ros2_bridges::{self, Ros2Args};
 use fusepose_bench::tracking::{self, TrackingArgs};
 use fusepose_bench::transport::{self, TransportArgs};
 
@@ -28,6 +29,8 @@ enum Command {
     E2e(E2eArgs),
     /// The network with and without tracking on rendered videos: time, accuracy.
     Tracking(TrackingArgs),
+    /// Latency and CPU of the ROS 2 bridges around a daemon (ROS image → frame, pose → DDS).
+    Ros2(Ros2Args),
     /// Receiver process of `transport` (internal).
     #[command(hide = true)]
     TransportReceiver {
@@ -80,6 +83,12 @@ fn main() -> anyhow::Result<()> {
             print!("{text}");
             std::fs::create_dir_all(&args.out)?;
             std::fs::write(args.out.join("tracking.txt"), &text)?;
+        }
+        Command::Ros2(args) => {
+            let report = ros2_bridges::run(&args)?;
+            let text = ros2_bridges::render(&report);
+            print!("{text}");
+            std::fs::write(args.out.join("ros2.txt"), &text)?;
         }
         Command::TransportReceiver { args } => transport::receiver::main(&args)?,
         Command::E2eDaemon { args } => e2e::processes::daemon_main(&args)?,

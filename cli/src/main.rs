@@ -3,6 +3,7 @@
 //! Thin over the libraries: every subcommand parses flags and calls into
 //! scene, estimator, train or client. No logic of its own beyond wiring.
 
+mod bridge;
 mod camera;
 mod dataset_path;
 mod demo;
@@ -27,6 +28,8 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
+    /// ROS 2 bridges over DDS: camera topics in (`ros2-camera`), detections out (`ros2`).
+    Bridge(bridge::Args),
     /// Act as a camera: replay a dataset or render frames, publish them to fuseposed.
     Camera(camera::Args),
     /// Print poses published by fuseposed as they arrive.
@@ -55,7 +58,7 @@ fn main() {
     tracing_subscriber::fmt()
         .with_env_filter(
             tracing_subscriber::EnvFilter::try_from_env("FUSEPOSE_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new("info")),
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(fusepose_ros2::DEFAULT_LOG_FILTER)),
         )
         .with_writer(std::io::stderr)
         // No colour codes in log files (e.g. the demo's logs/*.log).
@@ -63,6 +66,7 @@ fn main() {
         .init();
     let cli = Cli::parse();
     let result = match cli.command {
+        Command::Bridge(a) => bridge::run(a),
         Command::Camera(a) => camera::run(a),
         Command::Watch(a) => watch::run(a),
         Command::Stats(a) => stats::run(a),

@@ -36,19 +36,7 @@ enum Command {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
-        Command::List { objects, scale } => {
-            let (set, warnings) = if objects == "builtin" {
-                (builtin_objects(), Vec::new())
-            } else {
-                load_object_dir_checked(Path::new(&objects), scale, MissingTextures::Warn)
-                    .with_context(|| format!("loading object set '{objects}'"))?
-            };
-            print!("{}", table(&set));
-            for w in &warnings {
-                println!("warning: {w}");
-            }
-            Ok(())
-        }
+        Command::List { objects, scale } => print_listing(&objects, scale),
         Command::Export { dir } => {
             let set = builtin_objects();
             let info = export_objects(&set, &dir).with_context(|| format!("exporting to {}", dir.display()))?;
@@ -56,6 +44,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             Ok(())
         }
     }
+}
+
+/// Prints the listing of `objects` (see `List`) and any mesh-check warnings;
+/// `train --stage all` prints it before training, so a wrong unit or a
+/// symmetry to declare shows before the hour is spent.
+pub fn print_listing(objects: &str, scale: f64) -> anyhow::Result<()> {
+    let (set, warnings) = if objects == "builtin" {
+        (builtin_objects(), Vec::new())
+    } else {
+        load_object_dir_checked(Path::new(objects), scale, MissingTextures::Warn)
+            .with_context(|| format!("loading object set '{objects}'"))?
+    };
+    print!("{}", table(&set));
+    for w in &warnings {
+        println!("warning: {w}");
+    }
+    Ok(())
 }
 
 fn describe(symmetry: &Symmetry) -> String {

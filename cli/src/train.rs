@@ -3,9 +3,10 @@
 //! `fuseposed` loads; `--stage seg` trains the built-in segmenter instead
 //! ([`seg`]). See docs/TRAINING.md.
 
+mod pipeline;
 mod seg;
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -26,9 +27,12 @@ pub enum StageArg {
     Both,
     /// The built-in instance segmenter (its own weights; see `--out`).
     Seg,
+    /// Everything for a new object set within `--minutes`: pose net + refiner,
+    /// segmenter, fine-tune on the segmenter's masks, acceptance report.
+    All,
 }
 
-#[derive(clap::Args, Debug)]
+#[derive(clap::Args, Clone, Debug)]
 pub struct Args {
     /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
     #[arg(long, default_value = "builtin")]
@@ -57,9 +61,10 @@ pub struct Args {
     /// Continue from a checkpoint or a shipped weight file.
     #[arg(long)]
     pub resume: Option<PathBuf>,
-    /// What to train.
-    #[arg(long, value_enum, default_value = "both")]
-    pub stage: StageArg,
+    /// What to train [default: `all` for a fresh run on a mesh folder (the one
+    /// command for your own objects), else `both`].
+    #[arg(long, value_enum)]
+    pub stage: Option<StageArg>,
     /// Rendered frames per optimisation step.
     #[arg(long, default_value_t = 8)]
     pub batch: usize,
@@ -124,6 +129,27 @@ pub struct Args {
     /// (randomisation off, basic sensor) so accuracy on clean images holds.
     #[arg(long, default_value_t = SamplerConfig::training().plain_share)]
     pub plain_share: f64,
+    /// A fresh run for new objects starts from this trained pose-network file
+    /// (e.g. models/builtin.safetensors): its architecture and every layer
+    /// that does not depend on the number of classes; the class heads start fresh.
+    /// With `--stage all` and no --warm-start, the shipped model's trunk is used.
+    #[arg(long, conflicts_with = "resume")]
+    pub warm_start: Option<PathBuf>,
+    /// `--stage all`: start from random weights instead of the shipped model's trunk.
+    #[arg(long, conflicts_with = "warm_start")]
+    pub cold: bool,
+}
+
+impl Args {
+    /// The stage asked for, or the default for these flags (see `--stage`).
+    pub fn stage(&self) -> StageArg {
+        let fresh_mesh_folder = self.objects != "builtin" && self.resume.is_none() && self.dataset.is_none();
+        self.stage.unwrap_or(if fresh_mesh_folder && !self.validate_only && !self.bench_engine {
+            StageArg::All
+        } else {
+            StageArg::Both
+        })
+    }
 }
 
 /// The training scene sampler the flags ask for: `SamplerConfig::training()`
@@ -152,11 +178,20 @@ pub fn training_sampler(args: &Args) -> SamplerConfig {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let set =
         load_object_set(&args.objects, args.scale).with_context(|| format!("loading object set '{}'", args.objects))?;
-    let stage = match args.stage {
+    if args.objects != "builtin" && args.out == Path::new(crate::weights::SHIPPED_WEIGHTS) && !args.validate_only {
+        anyhow::bail!(
+            "--out defaults to the shipped built-in model ({}), which training '{}' would overwrite: \
+             pass --out models/<name>.safetensors",
+            crate::weights::SHIPPED_WEIGHTS,
+            args.objects
+        );
+    }
+    let stage = match args.stage() {
         StageArg::Pose => Stage::Pose,
         StageArg::Refine => Stage::Refine,
         StageArg::Both => Stage::Both,
         StageArg::Seg => return seg::run(set, &args),
+        StageArg::All => return pipeline::run(&args),
     };
     if args.bench_engine {
         return bench(&set, args.resume.as_deref());
@@ -184,6 +219,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let sampler = training_sampler(&args);
     let opts = TrainOptions {
+        warm_start: args.warm_start.clone(),
         out: args.out,
         minutes: args.minutes,
         steps: args.steps,

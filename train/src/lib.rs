@@ -18,3 +18,4 @@ pub mod seg;
 pub mod store;
 pub mod trainer;
 pub mod validate;
+pub mod warm_start;

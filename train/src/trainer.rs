@@ -70,6 +70,9 @@ pub struct TrainOptions {
     pub val_max_samples: usize,
     /// Architecture for a fresh run (ignored on resume: the file's config wins).
     pub config: Option<NetConfig>,
+    /// A fresh run starts from this trained file's trunk (its architecture,
+    /// every tensor that fits; [`crate::warm_start`]) instead of random weights.
+    pub warm_start: Option<PathBuf>,
     /// Where training (and validation) frames come from.
     pub source: Source,
     /// Human description of the data for the record.
@@ -161,6 +164,22 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
                 .with_context(|| format!("{} does not fit the object set", path.display()))?;
             let record = loaded.file.train.clone().unwrap_or_default();
             (loaded.net, loaded.file.config.clone(), record)
+        }
+        None if opts.warm_start.is_some() => {
+            let path = opts.warm_start.as_ref().expect("checked");
+            let source = fusepose_estimator::net::WeightFile::read(path)
+                .with_context(|| format!("reading the warm-start file {}", path.display()))?;
+            let cfg = crate::warm_start::config_for(&source.config, set.len());
+            let mut net = FusionNet::new(&cfg, &device);
+            let w = crate::warm_start::warm_start(&mut net, path)?;
+            log.line(&format!(
+                "# warm start from {}: {} tensors copied, {} fresh ({})",
+                path.display(),
+                w.copied,
+                w.fresh.len(),
+                w.fresh.join(", ")
+            ));
+            (net, cfg, TrainRecord { seed: opts.seed, ..TrainRecord::default() })
         }
         None => {
             let cfg = opts.config.clone().unwrap_or_else(|| NetConfig::new(set.len()));

@@ -22,6 +22,7 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
     let out = dir.join("out.safetensors");
     let start = WeightFile::read(&shipped).unwrap().train.unwrap_or_default().steps;
     let opts = TrainOptions {
+        warm_start: None,
         out: out.clone(),
         minutes: None,
         steps: Some(start + 2),

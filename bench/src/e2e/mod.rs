@@ -139,7 +139,8 @@ pub struct E2eReport {
     pub hlog: Option<PathBuf>,
 }
 
-fn daemon_config(args: &E2eArgs, ns: &IpcNamespace, deadline_ms: f64, hlog: &std::path::Path) -> String {
+/// The daemon's config of one run (also used by `ros2`).
+pub fn daemon_config(args: &E2eArgs, ns: &IpcNamespace, deadline_ms: f64, hlog: &std::path::Path) -> String {
     let pins = if args.pin { "[0, 1]" } else { "[]" };
     format!(
         "cameras = [\"{CAMERA}\"]\nlog_level = \"info\"\ndeadline_ms = {deadline_ms}\n\n[estimator]\nkind = \"net\"\nweights = {:?}\nmax_instances = 8\nrefine_iterations = {}\n{}deadline_aware = {}\npin_cpus = {pins}\n{}\n\n[estimator.tracking]\nenabled = {}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 0.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\nreceive_spin_us = {}\n",

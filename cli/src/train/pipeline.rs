@@ -1,0 +1,261 @@
+//! `fusepose train --stage all`: one command from a folder of meshes to a
+//! daemon-ready model. It runs every stage itself within the `--minutes`
+//! budget — pose net + refiner (47.5 %), segmenter (23.75 %), fine-tune of
+//! both pose stages on the segmenter's masks (23.75 %), 5 % for validation and the report — then an acceptance
+//! report on a held-out split rendered from the same meshes, and prints the
+//! `fuseposed.toml` lines that serve the model. Finished stages are kept in
+//! the work folder (`<checkpoint-dir>/<out stem>-stages/`), so running the same
+//! command again after an interruption continues with the first unfinished stage.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Context;
+use clap::Parser;
+
+use super::{Args, StageArg};
+
+/// Budget shares of the pose, segmenter and fine-tune stages. The rest
+/// (5 %) pays for the validation after each stage and the acceptance report,
+/// so the whole command ends within `--minutes`.
+const SHARES: [f64; 3] = [0.475, 0.2375, 0.2375];
+/// Render seed of the acceptance split (test-split seeds; training and
+/// validation scenes are drawn from other ranges).
+const ACCEPT_SEED: u64 = 7_340_021;
+
+#[derive(Parser)]
+struct RenderCmd {
+    #[command(flatten)]
+    args: crate::render::Args,
+}
+
+#[derive(Parser)]
+struct EvalCmd {
+    #[command(flatten)]
+    args: crate::eval::Args,
+}
+
+/// The stage outputs inside the work folder.
+struct Work {
+    dir: PathBuf,
+}
+
+impl Work {
+    fn pose(&self) -> PathBuf {
+        self.dir.join("1-pose.safetensors")
+    }
+    fn seg(&self) -> PathBuf {
+        self.dir.join("2-seg.safetensors")
+    }
+    fn pose_seg(&self) -> PathBuf {
+        self.dir.join("2-pose-seg.safetensors")
+    }
+    fn accept(&self) -> PathBuf {
+        self.dir.join("accept-split")
+    }
+}
+
+pub fn run(args: &Args) -> anyhow::Result<()> {
+    let minutes = args.minutes.context(
+        "--stage all needs --minutes (the whole budget, e.g. --minutes 60; stages get 47.5 / 23.75 / 23.75 % of it, the rest is for validation and the report)",
+    )?;
+    if !(minutes > 0.0) {
+        anyhow::bail!("--minutes must be positive, got {minutes}");
+    }
+    let stem = args.out.file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
+    let work = Work { dir: args.checkpoint_dir.join(format!("{stem}-stages")) };
+    std::fs::create_dir_all(&work.dir).with_context(|| format!("creating {}", work.dir.display()))?;
+    let [pose_min, seg_min, tune_min] = SHARES.map(|s| s * minutes);
+    println!(
+        "== training {} -> {} in {minutes:.0} min; work folder {}",
+        args.objects,
+        args.out.display(),
+        work.dir.display()
+    );
+
+    crate::objects::print_listing(&args.objects, args.scale)?;
+
+    // 1. Pose net + refiner, from the warm-start trunk or the --resume file when given.
+    if work.pose().exists() {
+        println!("== stage 1/4 done before: {}", work.pose().display());
+    } else {
+        println!("== stage 1/4: pose net + refiner, {pose_min:.1} min");
+        let mut a = args.clone();
+        a.stage = Some(StageArg::Both);
+        a.minutes = Some(pose_min);
+        a.out = work.pose();
+        a.seg_masks = 0.0;
+        a.checkpoint_dir = work.dir.join("1-checkpoints");
+        if a.resume.is_none() && a.warm_start.is_none() && !a.cold {
+            let trunk = crate::weights::resolve_weights(None)?;
+            println!("   warm start from {} (--cold for random weights)", trunk.display());
+            a.warm_start = Some(trunk);
+        }
+        // An interrupted run continues from its last checkpoint with what is left of the stage.
+        let ckpt = a.checkpoint_dir.join("checkpoint.safetensors");
+        if ckpt.exists() {
+            let base = args.resume.as_deref().map_or(Ok(0.0), trained_seconds)?;
+            let used = (trained_seconds(&ckpt)? - base) / 60.0;
+            a.minutes = Some((pose_min - used).max(0.5));
+            println!("   continuing from {} ({used:.1} min done)", ckpt.display());
+            (a.resume, a.warm_start) = (Some(ckpt), None);
+        }
+        super::run(a)?;
+    }
+
+    // 2. Segmenter for these objects, embedded into a copy of the pose file.
+    if work.pose_seg().exists() {
+        println!("== stage 2/4 done before: {}", work.pose_seg().display());
+    } else {
+        println!("== stage 2/4: segmenter, {seg_min:.1} min");
+        let mut a = args.clone();
+        a.stage = Some(StageArg::Seg);
+        a.minutes = Some(seg_min);
+        a.out = work.seg();
+        a.resume = None;
+        a.warm_start = None;
+        a.lr = 2e-3;
+        a.checkpoint_dir = work.dir.join("2-checkpoints");
+        super::run(a)?;
+        let tmp = work.dir.join("2-pose-seg.tmp.safetensors");
+        std::fs::copy(work.pose(), &tmp).with_context(|| format!("copying {}", work.pose().display()))?;
+        super::seg::embed_into(&work.seg(), &tmp)?;
+        std::fs::rename(&tmp, work.pose_seg())?;
+    }
+
+    // 3. Both pose stages again, half the frames with the segmenter's masks.
+    println!("== stage 3/4: fine-tune on segmenter masks, {tune_min:.1} min");
+    let mut a = args.clone();
+    a.stage = Some(StageArg::Both);
+    a.minutes = Some(tune_min);
+    a.resume = Some(work.pose_seg());
+    a.warm_start = None;
+    a.seg_masks = 0.5;
+    a.lr = args.lr.min(3e-4);
+    a.checkpoint_dir = work.dir.join("3-checkpoints");
+    super::run(a)?;
+
+    // 4. Acceptance on a held-out split of the same meshes.
+    println!("== stage 4/4: acceptance report");
+    let report = acceptance(args, &work)?;
+    let report_path = args.out.with_extension("report.md");
+    std::fs::write(&report_path, &report).with_context(|| format!("writing {}", report_path.display()))?;
+    println!("{report}");
+    println!("== report written to {}", report_path.display());
+    Ok(())
+}
+
+/// Training seconds recorded in a pose-network file.
+fn trained_seconds(path: &Path) -> anyhow::Result<f64> {
+    let file =
+        fusepose_estimator::net::WeightFile::read(path).with_context(|| format!("reading {}", path.display()))?;
+    Ok(file.train.map_or(0.0, |r| r.seconds))
+}
+
+/// Renders the acceptance split, evaluates the model with true and segmenter
+/// masks and returns the report (Markdown), ending with the daemon's config lines.
+fn acceptance(args: &Args, work: &Work) -> anyhow::Result<String> {
+    let split = work.accept();
+    let scale = args.scale.to_string();
+    let sensor = args.depth_sensor.to_string();
+    if !split.join("test").exists() {
+        let cmd = RenderCmd::try_parse_from([
+            "render",
+            "--objects",
+            &args.objects,
+            "--scale",
+            &scale,
+            "--out",
+            &split.to_string_lossy(),
+            "--split",
+            "test",
+            "--seed",
+            &ACCEPT_SEED.to_string(),
+            "--scenes",
+            "10",
+            "--frames-per-scene",
+            "3",
+            "--depth-sensor",
+            &sensor,
+        ])?;
+        crate::render::run(cmd.args)?;
+    }
+    let json = work.dir.join("accept-eval.json");
+    let plot = args.out.with_extension("report.png");
+    let overlays = args.out.with_extension("overlays");
+    let cmd = EvalCmd::try_parse_from([
+        "eval",
+        "--dataset",
+        &split.to_string_lossy(),
+        "--estimator",
+        "net",
+        "--weights",
+        &args.out.to_string_lossy(),
+        "--objects",
+        &args.objects,
+        "--scale",
+        &scale,
+        "--masks",
+        "gt,net",
+        "--json",
+        &json.to_string_lossy(),
+        "--plot",
+        &plot.to_string_lossy(),
+        "--overlay",
+        &overlays.to_string_lossy(),
+    ])?;
+    crate::eval::run(cmd.args)?;
+    let results: serde_json::Value = serde_json::from_slice(&std::fs::read(&json)?)?;
+    Ok(report_text(args, &split, &results))
+}
+
+fn num(v: &serde_json::Value, path: &[&str]) -> f64 {
+    path.iter().fold(v, |v, k| &v[*k]).as_f64().unwrap_or(f64::NAN)
+}
+
+/// The acceptance report: overall and per-object AUCs for true and segmenter
+/// masks, ghosts (estimates matching no object) per frame, and the config lines.
+fn report_text(args: &Args, split: &Path, results: &serde_json::Value) -> String {
+    let mut s = format!(
+        "# Acceptance report: {}\n\nHeld-out split {} (rendered from the same meshes, seed {ACCEPT_SEED}, randomised \
+         scenes, {} depth sensor; no training or validation scene). ADD-S / ADD(S) AUC (0-10 cm), %.\n\n\
+         | masks | ADD-S AUC | ADD(S) AUC | ADD-S < 2 cm | objects | ghosts / frame |\n|---|---|---|---|---|---|\n",
+        args.out.display(),
+        split.display(),
+        args.depth_sensor
+    );
+    let mut per_object = String::new();
+    for (key, label) in [("net/gt-masks", "true masks"), ("net/net-masks", "built-in segmenter")] {
+        let r = &results[key];
+        let frames = num(r, &["overall", "frames"]).max(1.0);
+        s += &format!(
+            "| {label} | {:.1} | {:.1} | {:.1} % | {} | {:.2} |\n",
+            num(r, &["overall", "add_s_auc"]),
+            num(r, &["overall", "add_s_auc_symmetric_aware"]),
+            num(r, &["overall", "add_s_lt_2cm"]),
+            num(r, &["overall", "count"]),
+            num(r, &["overall", "unmatched_estimates"]) / frames
+        );
+        if let Some(objects) = r["per_object"].as_object() {
+            per_object += &format!("\n{label}:\n\n| object | ADD-S AUC | ADD(S) AUC | count |\n|---|---|---|---|\n");
+            for (name, o) in objects {
+                per_object += &format!(
+                    "| {name} | {:.1} | {:.1} | {} |\n",
+                    num(o, &["add_s_auc"]),
+                    num(o, &["add_s_auc_symmetric_aware"]),
+                    num(o, &["count"])
+                );
+            }
+        }
+    }
+    s += &per_object;
+    s += &format!(
+        "\nAccuracy-threshold curves: {}\nOverlays (segmenter masks tinted, poses drawn), one per frame: {}/\n\n## Serve it\n\nIn `fuseposed.toml`:\n\n```toml\n[estimator]\nkind = \"net\"\n\
+         weights = \"{}\"\nobjects = \"{}\"\nobjects_scale = {}\nmasks = \"auto\"\n```\n",
+        args.out.with_extension("report.png").display(),
+        args.out.with_extension("overlays").display(),
+        args.out.display(),
+        args.objects,
+        args.scale
+    );
+    s
+}

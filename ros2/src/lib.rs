@@ -1,0 +1,79 @@
+//! # fusepose-ros2 — ROS 2 in and out over DDS
+//!
+//! Two bridges, each its own process beside `fuseposed` (which never links
+//! DDS), speaking ROS 2 on the wire through `ros2-client` (RustDDS, pure Rust,
+//! no ROS installation):
+//! - [`camera_bridge`]: a ROS 2 camera driver's colour + aligned depth +
+//!   CameraInfo topics → fusepose frames (iceoryx2);
+//! - [`pose_bridge`]: fusepose pose messages → `vision_msgs/Detection3DArray`
+//!   (and optionally `/tf`).
+//!
+//! Message types are defined here field by field ([`msg`]). See docs/ROS2.md.
+
+pub mod camera_bridge;
+pub mod clock;
+pub mod detections;
+pub mod image;
+pub mod msg;
+pub mod node;
+pub mod pairing;
+pub mod pose_bridge;
+pub mod qos;
+pub mod ratelog;
+pub mod stamps;
+
+use std::path::Path;
+
+use anyhow::Context as _;
+pub use camera_bridge::CameraBridgeArgs;
+pub use detections::{ObjectInfo, ObjectTable};
+pub use pose_bridge::PoseBridgeArgs;
+
+/// Log filter when `FUSEPOSE_LOG` is unset: RustDDS warns on every message
+/// larger than one UDP datagram (each image), which says nothing to a user.
+pub const DEFAULT_LOG_FILTER: &str = "info,rustdds=error,ros2_client=warn";
+
+/// The bridges, as subcommands of `fusepose bridge` and of `fusepose-ros2`.
+#[derive(Debug, clap::Subcommand)]
+pub enum BridgeCommand {
+    /// ROS 2 camera topics (colour, aligned depth, CameraInfo) → frames of a fusepose camera.
+    #[command(name = "ros2-camera")]
+    Ros2Camera(CameraBridgeArgs),
+    /// Poses of a fusepose camera → vision_msgs/Detection3DArray (and /tf) on ROS 2.
+    #[command(name = "ros2")]
+    Ros2(PoseBridgeArgs),
+}
+
+/// Runs the bridge `command` until it is killed.
+pub fn run(command: &BridgeCommand) -> anyhow::Result<()> {
+    match command {
+        BridgeCommand::Ros2Camera(args) => camera_bridge::run(args),
+        BridgeCommand::Ros2(args) => {
+            let objects = object_table(&args.objects, args.scale)?;
+            pose_bridge::run(args, objects)
+        }
+    }
+}
+
+/// Names and boxes of the object set `source` (`builtin` or a mesh folder), in class-id order.
+pub fn object_table(source: &str, scale: f64) -> anyhow::Result<ObjectTable> {
+    let set = if source == "builtin" {
+        fusepose_scene::builtin::builtin_objects()
+    } else {
+        fusepose_scene::mesh_io::load_object_dir(Path::new(source), scale)
+            .with_context(|| format!("loading object set '{source}' (--objects)"))?
+    };
+    let objects = set
+        .objects
+        .iter()
+        .map(|o| {
+            let (lo, hi) = (o.bbox_min, o.bbox_max);
+            ObjectInfo {
+                name: o.name.clone(),
+                size: [hi.x - lo.x, hi.y - lo.y, hi.z - lo.z],
+                box_centre: [(hi.x + lo.x) / 2.0, (hi.y + lo.y) / 2.0, (hi.z + lo.z) / 2.0],
+            }
+        })
+        .collect();
+    Ok(ObjectTable { objects })
+}

@@ -1,0 +1,28 @@
+//! `fusepose-ros2`: the ROS 2 bridges on their own (the same subcommands as
+//! `fusepose bridge`), for machines that need nothing else of the CLI.
+
+use clap::Parser;
+
+/// fusepose ROS 2 bridges over DDS.
+#[derive(Parser)]
+#[command(name = "fusepose-ros2", version, about)]
+struct Cli {
+    #[command(subcommand)]
+    command: fusepose_ros2::BridgeCommand,
+}
+
+fn main() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("FUSEPOSE_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(fusepose_ros2::DEFAULT_LOG_FILTER)),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .init();
+    let cli = Cli::parse();
+    if let Err(e) = fusepose_ros2::run(&cli.command) {
+        eprintln!("error: {e:#}");
+        std::process::exit(1);
+    }
+}

@@ -1,0 +1,150 @@
+//! "Your objects, served within the hour" as a pipeline check (issue 20), not
+//! an accuracy test: two meshes written here as a user's folder, the one
+//! command `fusepose train --objects DIR --stage all --minutes M` for a few
+//! seconds (warm-started from the shipped model when it is present), its
+//! acceptance report, and a separate `fuseposed` started with exactly the
+//! `fuseposed.toml` lines the report prints, answering an unlabelled frame of
+//! those objects (so its own segmenter runs) with an OK pose message.
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::Duration;
+
+use fusepose_client::{ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, Producer};
+use fusepose_scene::Intrinsics;
+use fusepose_scene::render::{NoiseConfig, RenderTarget};
+use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
+use fusepose_tests::*;
+
+/// A closed triangle mesh as Wavefront OBJ (metres, counter-clockwise faces seen from outside).
+fn write_obj(path: &Path, vertices: &[[f64; 3]], faces: &[[usize; 3]]) -> anyhow::Result<()> {
+    let mut text = String::from("# written by tests/train_and_serve.rs\n");
+    for v in vertices {
+        text += &format!("v {} {} {}\n", v[0], v[1], v[2]);
+    }
+    for f in faces {
+        text += &format!("f {} {} {}\n", f[0] + 1, f[1] + 1, f[2] + 1);
+    }
+    std::fs::write(path, text)?;
+    Ok(())
+}
+
+/// A box of half extents `h`, centred at the origin.
+fn write_box(path: &Path, h: [f64; 3]) -> anyhow::Result<()> {
+    let v: Vec<[f64; 3]> = (0..8)
+        .map(|i| {
+            let s = |b: usize| if i & b != 0 { 1.0 } else { -1.0 };
+            [s(1) * h[0], s(2) * h[1], s(4) * h[2]]
+        })
+        .collect();
+    let faces = [
+        [0, 2, 3],
+        [0, 3, 1],
+        [4, 5, 7],
+        [4, 7, 6],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 6, 7],
+        [2, 7, 3],
+        [0, 4, 6],
+        [0, 6, 2],
+        [1, 3, 7],
+        [1, 7, 5],
+    ];
+    write_obj(path, &v, &faces)
+}
+
+/// A hexagonal prism (a can-like object) of radius `r` and half height `hz`.
+fn write_prism(path: &Path, r: f64, hz: f64) -> anyhow::Result<()> {
+    let mut v = Vec::new();
+    for z in [-hz, hz] {
+        for k in 0..6 {
+            let a = k as f64 * std::f64::consts::PI / 3.0;
+            v.push([r * a.cos(), r * a.sin(), z]);
+        }
+    }
+    v.push([0.0, 0.0, -hz]);
+    v.push([0.0, 0.0, hz]);
+    let mut faces = Vec::new();
+    for k in 0..6 {
+        let n = (k + 1) % 6;
+        faces.push([k, n, 6 + n]);
+        faces.push([k, 6 + n, 6 + k]);
+        faces.push([12, n, k]);
+        faces.push([13, 6 + k, 6 + n]);
+    }
+    write_obj(path, &v, &faces)
+}
+
+fn shipped_weights() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors")
+}
+
+#[test]
+fn one_command_trains_a_new_object_set_and_the_daemon_serves_it() -> anyhow::Result<()> {
+    let env = TestEnv::new("trainserve")?;
+    let dir = tempfile::tempdir()?;
+    let objects = dir.path().join("my_objects");
+    std::fs::create_dir_all(&objects)?;
+    write_box(&objects.join("tea_box.obj"), [0.045, 0.03, 0.07])?;
+    write_prism(&objects.join("hex_can.obj"), 0.035, 0.05)?;
+    let out = dir.path().join("mine.safetensors");
+
+    let mut cmd = Command::new(workspace_binary("fusepose-cli", "fusepose")?);
+    cmd.args(["train", "--objects"]).arg(&objects);
+    cmd.args(["--stage", "all", "--minutes", "0.25", "--batch", "2", "--val-frames", "3", "--val-samples", "6"]);
+    cmd.args(["--quiet", "--checkpoint-dir"]).arg(dir.path().join("work")).arg("--out").arg(&out);
+    if shipped_weights().exists() {
+        cmd.arg("--warm-start").arg(shipped_weights());
+    } else {
+        eprintln!("NOTE: {} is missing: training from random weights", shipped_weights().display());
+    }
+    let run = cmd.output()?;
+    let stdout = String::from_utf8_lossy(&run.stdout);
+    assert!(run.status.success(), "train failed:\n{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
+    for stage in ["stage 1/4", "stage 2/4", "stage 3/4", "stage 4/4"] {
+        assert!(stdout.contains(stage), "{stage} missing from:\n{stdout}");
+    }
+
+    // The report: both mask sources scored on the held-out split, and the config lines.
+    let report = std::fs::read_to_string(out.with_extension("report.md"))?;
+    assert!(report.contains("| true masks |") && report.contains("| built-in segmenter |"), "{report}");
+    assert!(report.contains("| tea_box |") && report.contains("| hex_can |"), "{report}");
+    let toml = report.split("```toml\n").nth(1).and_then(|s| s.split("```").next()).expect("a toml block");
+    let lines: Vec<&str> = toml.lines().filter(|l| !l.starts_with('[')).collect();
+    assert!(lines.iter().any(|l| l.starts_with("weights = ")), "{toml}");
+
+    // The daemon with those lines answers an unlabelled frame of the new objects.
+    let config = env.write_daemon_config(&(lines.join("\n") + "\nmax_instances = 8"))?;
+    let _daemon = start_daemon(&env, &config)?;
+    let set = fusepose_scene::mesh_io::load_object_set(&objects.to_string_lossy(), 1.0)?;
+    let k = Intrinsics::YCB_VIDEO;
+    let layout = FrameLayout {
+        width: k.width,
+        height: k.height,
+        color_format: ColorFormat::Rgb8,
+        depth_format: DepthFormat::U16,
+        depth_scale: 1e-4,
+        labels: None,
+    };
+    let ipc = Ipc::new(&env.ipc_options())?;
+    let mut producer = Producer::create(&ipc, "cam0", layout)?;
+    let mut consumer = Consumer::open(&ipc, "cam0")?;
+    let cfg = SamplerConfig { min_objects: 2, max_objects: 2, ..SamplerConfig::default() };
+    let scene = sample_scene(&set, &cfg, 77).map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut target = RenderTarget::for_intrinsics(&k);
+    render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Class, &mut target)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let mut frame = producer.loan()?;
+    frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+    let planes = frame.planes_mut();
+    planes.color.copy_from_slice(target.rgb());
+    if let DepthMut::U16(d) = planes.depth {
+        d.copy_from_slice(target.depth_u16());
+    }
+    let sequence = frame.send()?;
+    let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
+    assert!(msg.is_ok(), "status {:#x}, reason {:?}", msg.status, msg.invalid());
+    assert!(msg.objects().iter().all(|o| (1..=2).contains(&o.class_id)), "{:?}", msg.objects());
+    Ok(())
+}
