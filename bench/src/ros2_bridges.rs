@@ -29,14 +29,14 @@ use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
 use anyhow::Context as _;
-use fusepose_client::{Consumer, Ipc, PoseMessage, StatsClient, monotonic_ns};
+use fusepose_client::{Consumer, PoseMessage, monotonic_ns};
 use fusepose_ros2::clock::ClockMap;
 use fusepose_ros2::msg::{ByteBuf, CameraInfo, Detection3DArray, Header, Image, Time};
 use fusepose_ros2::node::{open_node, topic};
 use fusepose_ros2::qos::{DurabilityArg, ReliabilityArg, profile};
 use ros2_client::dds::rustdds::mio1::{Events, Interest, Poll, Token};
 
-use crate::child::{ChildProcess, IpcNamespace};
+use crate::child::IpcNamespace;
 use crate::e2e::processes::CAMERA;
 use crate::latency::{self, Percentiles};
 use crate::loadavg;
@@ -51,8 +51,8 @@ pub struct Ros2Args {
     #[arg(long, default_value_t = 30.0)]
     pub seconds: f64,
     /// Objects per frame.
-    #[arg(long, default_value_t = 5)]
-    pub objects: usize,
+    #[arg(long, alias = "objects", default_value_t = 5)]
+    pub objects_per_frame: usize,
     /// Distinct rendered frames of the video (played back and forth).
     #[arg(long, default_value_t = 24)]
     pub video_frames: usize,
@@ -113,7 +113,7 @@ struct RosFrame {
 
 fn ros_frames(args: &Ros2Args) -> anyhow::Result<(Vec<RosFrame>, CameraInfo)> {
     let set = fusepose_scene::builtin::builtin_objects();
-    let video = crate::video::render_video(&set, args.objects, args.video_frames.max(1), 0.5, args.seed)?;
+    let video = crate::video::render_video(&set, args.objects_per_frame, args.video_frames.max(1), 0.5, args.seed)?;
     let k = video.intrinsics;
     let header = Header { stamp: Time::default(), frame_id: "camera_color_optical_frame".into() };
     let frames = video
@@ -180,18 +180,7 @@ pub fn run(args: &Ros2Args) -> anyhow::Result<Ros2Report> {
     std::fs::write(&config_path, crate::e2e::daemon_config(&e2e, &ns, deadline_ms, &ns.dir.join("d.hlog")))?;
     let log = args.out.join("ros2.daemon.log");
     let env = ns.env();
-    let _daemon = ChildProcess::spawn(
-        "daemon",
-        &["e2e-daemon".into(), config_path.display().to_string(), log.display().to_string()],
-        &env,
-        Duration::from_secs(120),
-    )?;
-    let ipc = Ipc::new(&ns.options())?;
-    let stats = StatsClient::open(&ipc, CAMERA)?;
-    let t0 = Instant::now();
-    while stats.query(Duration::from_millis(300)).is_err() {
-        anyhow::ensure!(t0.elapsed() < Duration::from_secs(60), "the daemon did not answer (log: {})", log.display());
-    }
+    let (_daemon, ipc, _stats) = crate::e2e::start_daemon(&ns, &config_path, &log)?;
     let mut consumer = Consumer::open(&ipc, CAMERA)?;
 
     let domain = 1 + (std::process::id() % 200) as u16;
@@ -329,7 +318,7 @@ pub fn render(r: &Ros2Report) -> String {
         "# fusepose-bench ros2: {} FPS, 640x480 rgb8 + 16UC1, {} objects, daemon with its segmenter\n\
          load before: {}  after: {}\n\n\
          | path | frames | p50 ms | p99 ms | p99.9 ms | max ms |\n|---|---|---|---|---|---|\n",
-        r.args.fps, r.args.objects, r.load_before, r.load_after
+        r.args.fps, r.args.objects_per_frame, r.load_before, r.load_after
     );
     for (name, p) in [
         ("frames in: ROS image publish → daemon has the frame", &r.frames_in),

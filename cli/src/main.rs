@@ -5,6 +5,7 @@
 
 mod bridge;
 mod camera;
+mod camera_model;
 mod dataset_path;
 mod demo;
 mod eval;

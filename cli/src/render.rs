@@ -137,6 +137,8 @@ pub struct Args {
     /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
     #[arg(long, default_value = "builtin")]
     pub objects: String,
+    #[arg(long, default_value = "ycb-video", value_parser = crate::camera_model::parse, help = crate::camera_model::HELP)]
+    pub intrinsics: Intrinsics,
     /// Metres per mesh-file unit for a mesh folder (0.001 for millimetre models).
     #[arg(long = "scale", alias = "mesh-scale", default_value_t = 1.0)]
     pub mesh_scale: f64,
@@ -230,7 +232,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         BopWriter::create(&args.out, split, &set, &source).with_context(|| format!("preparing split '{split}'"))?;
     writer.set_split_params(split_params(&args))?;
 
-    let k = Intrinsics::YCB_VIDEO;
+    let k = args.intrinsics;
     let cfg = sampler_config(&args, k);
     let noise = match args.noise {
         Toggle::On => NoiseConfig::default(),
@@ -329,7 +331,7 @@ pub fn sampler_config(args: &Args, k: Intrinsics) -> SamplerConfig {
 }
 
 fn split_params(args: &Args) -> serde_json::Value {
-    let cfg = sampler_config(args, Intrinsics::YCB_VIDEO);
+    let cfg = sampler_config(args, args.intrinsics);
     serde_json::json!({
         "seed": args.seed,
         "seed_rule": "scene i uses splitmix64(splitmix64(splitmix64(seed) ^ split_tag) ^ i)",

@@ -129,6 +129,8 @@ pub struct Args {
     /// (randomisation off, basic sensor) so accuracy on clean images holds.
     #[arg(long, default_value_t = SamplerConfig::training().plain_share)]
     pub plain_share: f64,
+    #[arg(long, default_value = "ycb-video", value_parser = crate::camera_model::parse, help = crate::camera_model::HELP)]
+    pub intrinsics: fusepose_scene::Intrinsics,
     /// A fresh run for new objects starts from this trained pose-network file
     /// (e.g. models/builtin.safetensors): its architecture and every layer
     /// that does not depend on the number of classes; the class heads start fresh.
@@ -159,9 +161,10 @@ impl Args {
 pub fn training_sampler(args: &Args) -> SamplerConfig {
     let plain = args.randomize == Randomize::Off && args.depth_sensor == DepthSensor::Basic && args.single_instances;
     if plain {
-        return SamplerConfig::default();
+        return SamplerConfig { intrinsics: args.intrinsics, ..SamplerConfig::default() };
     }
     let mut s = SamplerConfig {
+        intrinsics: args.intrinsics,
         randomize: args.randomize,
         depth_sensor: args.depth_sensor,
         plain_share: args.plain_share,
@@ -176,9 +179,11 @@ pub fn training_sampler(args: &Args) -> SamplerConfig {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let set =
-        load_object_set(&args.objects, args.scale).with_context(|| format!("loading object set '{}'", args.objects))?;
-    if args.objects != "builtin" && args.out == Path::new(crate::weights::SHIPPED_WEIGHTS) && !args.validate_only {
+    if args.objects != "builtin"
+        && args.out == Path::new(crate::weights::SHIPPED_WEIGHTS)
+        && !args.validate_only
+        && !args.bench_engine
+    {
         anyhow::bail!(
             "--out defaults to the shipped built-in model ({}), which training '{}' would overwrite: \
              pass --out models/<name>.safetensors",
@@ -186,6 +191,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.objects
         );
     }
+    let set =
+        load_object_set(&args.objects, args.scale).with_context(|| format!("loading object set '{}'", args.objects))?;
     let stage = match args.stage() {
         StageArg::Pose => Stage::Pose,
         StageArg::Refine => Stage::Refine,
@@ -293,4 +300,33 @@ fn bench(set: &fusepose_scene::ObjectSet, weights: Option<&std::path::Path>) -> 
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use clap::Parser;
+
+    use super::*;
+
+    #[derive(Parser)]
+    struct Cmd {
+        #[command(flatten)]
+        args: Args,
+    }
+
+    fn args(flags: &[&str]) -> Args {
+        Cmd::try_parse_from(std::iter::once("train").chain(flags.iter().copied())).unwrap().args
+    }
+
+    #[test]
+    fn a_mesh_folder_gets_the_whole_pipeline_and_never_overwrites_the_shipped_model() {
+        assert!(matches!(args(&["--objects", "meshes", "--out", "m.safetensors"]).stage(), StageArg::All));
+        assert!(matches!(args(&[]).stage(), StageArg::Both), "builtin keeps its old default");
+        assert!(matches!(args(&["--objects", "meshes", "--resume", "m.safetensors"]).stage(), StageArg::Both));
+        assert!(matches!(args(&["--objects", "meshes", "--stage", "seg"]).stage(), StageArg::Seg));
+        let err = run(args(&["--objects", "/nonexistent/meshes", "--minutes", "1"])).unwrap_err().to_string();
+        assert!(err.contains("would overwrite") && err.contains("--out models/<name>.safetensors"), "{err}");
+        assert_eq!(args(&["--intrinsics", "realsense-d435"]).intrinsics.fx, 615.0);
+        assert_eq!(training_sampler(&args(&["--intrinsics", "realsense-d435"])).intrinsics.fx, 615.0);
+    }
 }

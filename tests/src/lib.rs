@@ -533,3 +533,34 @@ pub fn run_fp_soak(args: &[&str]) -> anyhow::Result<std::collections::HashMap<St
 pub fn soak_number(r: &std::collections::HashMap<String, String>, key: &str) -> f64 {
     r.get(key).and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("no numeric {key} in {r:?}"))
 }
+
+/// The layout of an unlabelled 640x480 frame as the renderer writes it
+/// (rgb8, u16 depth in 0.1 mm): the daemon must segment it itself.
+pub fn rendered_layout(k: &fusepose_scene::Intrinsics) -> fusepose_client::FrameLayout {
+    fusepose_client::FrameLayout {
+        width: k.width,
+        height: k.height,
+        color_format: fusepose_client::ColorFormat::Rgb8,
+        depth_format: fusepose_client::DepthFormat::U16,
+        depth_scale: 1e-4,
+        labels: None,
+    }
+}
+
+/// Sends what `target` holds (colour and depth, no labels) as one frame; returns its sequence.
+pub fn send_rendered(
+    producer: &mut fusepose_client::Producer,
+    k: &fusepose_scene::Intrinsics,
+    target: &fusepose_scene::render::RenderTarget,
+) -> anyhow::Result<u64> {
+    let mut frame = producer.loan()?;
+    frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+    let planes = frame.planes_mut();
+    anyhow::ensure!(planes.labels.is_none(), "the layout must carry no labels");
+    planes.color.copy_from_slice(target.rgb());
+    match planes.depth {
+        fusepose_client::DepthMut::U16(d) => d.copy_from_slice(target.depth_u16()),
+        _ => anyhow::bail!("the layout must carry u16 depth"),
+    }
+    Ok(frame.send()?)
+}

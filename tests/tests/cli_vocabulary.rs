@@ -11,8 +11,8 @@ use std::time::Duration;
 
 use fusepose_tests::*;
 
-const SUBCOMMANDS: [&str; 8] = ["camera", "watch", "stats", "render", "objects", "train", "eval", "demo"];
-const BENCH_SUBCOMMANDS: [&str; 4] = ["transport", "estimator", "e2e", "tracking"];
+const SUBCOMMANDS: [&str; 9] = ["camera", "watch", "stats", "render", "objects", "train", "eval", "demo", "bridge"];
+const BENCH_SUBCOMMANDS: [&str; 5] = ["transport", "estimator", "e2e", "tracking", "ros2"];
 
 fn fusepose() -> PathBuf {
     workspace_binary("fusepose-cli", "fusepose").expect("building fusepose")
@@ -70,15 +70,22 @@ fn every_subcommand_has_help_with_the_shared_flag_names() -> anyhow::Result<()> 
     for sub in ["render", "train", "eval"] {
         assert!(helps[sub].contains("--objects <OBJECTS>"), "{sub}: --objects names the object set:\n{}", helps[sub]);
     }
+    // The ROS 2 bridges: the daemon's camera by --name, the DDS domain by --domain-id, QoS flags alike.
+    for bridge in ["ros2-camera", "ros2"] {
+        let text = help(&env, &fp, &["bridge", bridge])?;
+        for flag in ["--name", "--domain-id", "--reliability", "--history-depth", "--durability"] {
+            assert!(text.contains(flag), "bridge {bridge} has no {flag}:\n{text}");
+        }
+    }
     for sub in BENCH_SUBCOMMANDS {
         let text = help(&env, &fb, &[sub])?;
         if sub != "transport" {
             assert!(text.contains("--weights") && text.contains("models/builtin.safetensors"), "bench {sub}:\n{text}");
         }
-        if ["e2e", "estimator", "tracking"].contains(&sub) {
+        if ["e2e", "estimator", "tracking", "ros2"].contains(&sub) {
             assert!(text.contains("--objects-per-frame"), "bench {sub}: counts are --objects-per-frame:\n{text}");
         }
-        if sub == "e2e" {
+        if sub == "e2e" || sub == "ros2" {
             assert!(text.contains("--fps") && text.contains("--seed"), "bench e2e:\n{text}");
         }
     }

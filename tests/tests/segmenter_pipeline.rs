@@ -8,7 +8,7 @@
 use std::path::PathBuf;
 use std::time::Duration;
 
-use fusepose_client::{ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, Producer, Stage};
+use fusepose_client::{Consumer, Ipc, Producer, Stage};
 use fusepose_scene::Intrinsics;
 use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
@@ -37,14 +37,7 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
     let objects = fusepose_scene::builtin::builtin_objects();
     let metrics: Vec<ObjectMetric> = objects.objects.iter().map(|m| ObjectMetric::for_model(m).unwrap()).collect();
     let k = Intrinsics::YCB_VIDEO;
-    let layout = FrameLayout {
-        width: k.width,
-        height: k.height,
-        color_format: ColorFormat::Rgb8,
-        depth_format: DepthFormat::U16,
-        depth_scale: 1e-4,
-        labels: None,
-    };
+    let layout = rendered_layout(&k);
     let ipc = Ipc::new(&env.ipc_options())?;
     let mut producer = Producer::create(&ipc, "cam0", layout)?;
     let mut consumer = Consumer::open(&ipc, "cam0")?;
@@ -57,15 +50,7 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
         let truth =
             render_view_labelled(&scene, &objects, 0, &k, &NoiseConfig::default(), LabelKind::Class, &mut target)
                 .map_err(|e| anyhow::anyhow!("{e}"))?;
-        let mut frame = producer.loan()?;
-        frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
-        let planes = frame.planes_mut();
-        assert!(planes.labels.is_none(), "the layout must carry no labels");
-        planes.color.copy_from_slice(target.rgb());
-        if let DepthMut::U16(d) = planes.depth {
-            d.copy_from_slice(target.depth_u16());
-        }
-        let sequence = frame.send()?;
+        let sequence = send_rendered(&mut producer, &k, &target)?;
         let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
         frames += 1;
         assert!(msg.is_ok(), "frame {sequence}: status {:#x}", msg.status);

@@ -1,16 +1,16 @@
 //! "Your objects, served within the hour" as a pipeline check (issue 20), not
 //! an accuracy test: two meshes written here as a user's folder, the one
-//! command `fusepose train --objects DIR --stage all --minutes M` for a few
-//! seconds (warm-started from the shipped model when it is present), its
+//! command `fusepose train --objects DIR --minutes M --out FILE` for a few
+//! seconds (the whole pipeline by default, warm-started from the shipped trunk), its
 //! acceptance report, and a separate `fuseposed` started with exactly the
 //! `fuseposed.toml` lines the report prints, answering an unlabelled frame of
 //! those objects (so its own segmenter runs) with an OK pose message.
 
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Command;
 use std::time::Duration;
 
-use fusepose_client::{ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, Producer};
+use fusepose_client::{Consumer, Ipc, Producer};
 use fusepose_scene::Intrinsics;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
@@ -76,10 +76,6 @@ fn write_prism(path: &Path, r: f64, hz: f64) -> anyhow::Result<()> {
     write_obj(path, &v, &faces)
 }
 
-fn shipped_weights() -> PathBuf {
-    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors")
-}
-
 #[test]
 fn one_command_trains_a_new_object_set_and_the_daemon_serves_it() -> anyhow::Result<()> {
     let env = TestEnv::new("trainserve")?;
@@ -92,16 +88,14 @@ fn one_command_trains_a_new_object_set_and_the_daemon_serves_it() -> anyhow::Res
 
     let mut cmd = Command::new(workspace_binary("fusepose-cli", "fusepose")?);
     cmd.args(["train", "--objects"]).arg(&objects);
-    cmd.args(["--stage", "all", "--minutes", "0.25", "--batch", "2", "--val-frames", "3", "--val-samples", "6"]);
+    // No --stage: a fresh run on a mesh folder is the whole pipeline, warm-started from the shipped trunk.
+    cmd.args(["--minutes", "0.25", "--batch", "2", "--val-frames", "3", "--val-samples", "6"]);
     cmd.args(["--quiet", "--checkpoint-dir"]).arg(dir.path().join("work")).arg("--out").arg(&out);
-    if shipped_weights().exists() {
-        cmd.arg("--warm-start").arg(shipped_weights());
-    } else {
-        eprintln!("NOTE: {} is missing: training from random weights", shipped_weights().display());
-    }
     let run = cmd.output()?;
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(run.status.success(), "train failed:\n{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
+    assert!(stdout.contains("warm start from"), "no warm start:\n{stdout}");
+    assert!(stdout.contains("tea_box") && stdout.contains("suggested from geometry"), "no mesh listing:\n{stdout}");
     for stage in ["stage 1/4", "stage 2/4", "stage 3/4", "stage 4/4"] {
         assert!(stdout.contains(stage), "{stage} missing from:\n{stdout}");
     }
@@ -119,30 +113,15 @@ fn one_command_trains_a_new_object_set_and_the_daemon_serves_it() -> anyhow::Res
     let _daemon = start_daemon(&env, &config)?;
     let set = fusepose_scene::mesh_io::load_object_set(&objects.to_string_lossy(), 1.0)?;
     let k = Intrinsics::YCB_VIDEO;
-    let layout = FrameLayout {
-        width: k.width,
-        height: k.height,
-        color_format: ColorFormat::Rgb8,
-        depth_format: DepthFormat::U16,
-        depth_scale: 1e-4,
-        labels: None,
-    };
     let ipc = Ipc::new(&env.ipc_options())?;
-    let mut producer = Producer::create(&ipc, "cam0", layout)?;
+    let mut producer = Producer::create(&ipc, "cam0", rendered_layout(&k))?;
     let mut consumer = Consumer::open(&ipc, "cam0")?;
     let cfg = SamplerConfig { min_objects: 2, max_objects: 2, ..SamplerConfig::default() };
     let scene = sample_scene(&set, &cfg, 77).map_err(|e| anyhow::anyhow!("{e}"))?;
     let mut target = RenderTarget::for_intrinsics(&k);
     render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Class, &mut target)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
-    let mut frame = producer.loan()?;
-    frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
-    let planes = frame.planes_mut();
-    planes.color.copy_from_slice(target.rgb());
-    if let DepthMut::U16(d) = planes.depth {
-        d.copy_from_slice(target.depth_u16());
-    }
-    let sequence = frame.send()?;
+    let sequence = send_rendered(&mut producer, &k, &target)?;
     let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
     assert!(msg.is_ok(), "status {:#x}, reason {:?}", msg.status, msg.invalid());
     assert!(msg.objects().iter().all(|o| (1..=2).contains(&o.class_id)), "{:?}", msg.objects());

@@ -36,7 +36,7 @@ use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, Workspa
 use fusepose_scene::bop::BopDataset;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
 use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
-use fusepose_scene::{Intrinsics, ObjectSet, Pose};
+use fusepose_scene::{ObjectSet, Pose};
 use nalgebra::{Translation3, Vector3};
 use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
@@ -156,7 +156,7 @@ pub fn frame_samples(
     seg: Option<&mut SegMasks>,
 ) -> anyhow::Result<Vec<Sample>> {
     let sampler = &cfg.sampler;
-    let k = Intrinsics::YCB_VIDEO;
+    let k = sampler.intrinsics;
     let scene = match sample_scene(set, sampler, seed) {
         Ok(s) => s,
         Err(fusepose_scene::sampler::SamplerError::Placement { .. }) => return Ok(Vec::new()),
@@ -370,7 +370,7 @@ impl Stream {
             .name("fusepose-data".into())
             .spawn(move || -> anyhow::Result<()> {
                 let mut ws = workspace(&set, &cfg)?;
-                let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
+                let mut target = RenderTarget::for_intrinsics(&cfg.sampler.intrinsics);
                 let mut seed = first_seed;
                 let mut order: Vec<usize> = match &source {
                     Source::Bop(ds) => bop_indices(ds, false),

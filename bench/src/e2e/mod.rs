@@ -157,6 +157,32 @@ pub fn daemon_config(args: &E2eArgs, ns: &IpcNamespace, deadline_ms: f64, hlog: 
     )
 }
 
+/// Starts the daemon process of `config` (logging to `log`) in `ns` and
+/// waits until it answers a stats query: then its services exist.
+pub fn start_daemon(
+    ns: &IpcNamespace,
+    config: &std::path::Path,
+    log: &std::path::Path,
+) -> anyhow::Result<(ChildProcess, Ipc, StatsClient)> {
+    let daemon = ChildProcess::spawn(
+        "daemon",
+        &["e2e-daemon".into(), config.display().to_string(), log.display().to_string()],
+        &ns.env(),
+        Duration::from_secs(120),
+    )?;
+    let ipc = Ipc::new(&ns.options())?;
+    let stats = StatsClient::open(&ipc, CAMERA)?;
+    let t0 = std::time::Instant::now();
+    while stats.query(Duration::from_millis(300)).is_err() {
+        anyhow::ensure!(
+            t0.elapsed() < Duration::from_secs(60),
+            "the daemon did not answer within 60 s (log: {})",
+            log.display()
+        );
+    }
+    Ok((daemon, ipc, stats))
+}
+
 fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
     let seconds = if args.smoke { args.seconds.min(2.0) } else { args.seconds };
     let warmup = fps.ceil() as u64;
@@ -172,23 +198,7 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
     let log = args.out.join(format!("e2e-{tag}.daemon.log"));
     let env = ns.env();
 
-    let daemon = ChildProcess::spawn(
-        "daemon",
-        &["e2e-daemon".into(), config_path.display().to_string(), log.display().to_string()],
-        &env,
-        Duration::from_secs(120),
-    )?;
-    // Ready when it answers a stats query.
-    let ipc = Ipc::new(&ns.options())?;
-    let stats = StatsClient::open(&ipc, CAMERA)?;
-    let t0 = std::time::Instant::now();
-    while stats.query(Duration::from_millis(300)).is_err() {
-        anyhow::ensure!(
-            t0.elapsed() < Duration::from_secs(60),
-            "the daemon did not answer within 60 s (log: {})",
-            log.display()
-        );
-    }
+    let (daemon, _ipc, stats) = start_daemon(&ns, &config_path, &log)?;
     let file = ns.dir.join("latencies.txt");
     let mut consumer = ChildProcess::spawn(
         "consumer",

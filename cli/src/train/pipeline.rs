@@ -157,6 +157,7 @@ fn acceptance(args: &Args, work: &Work) -> anyhow::Result<String> {
     let split = work.accept();
     let scale = args.scale.to_string();
     let sensor = args.depth_sensor.to_string();
+    let camera = crate::camera_model::format(&args.intrinsics);
     if !split.join("test").exists() {
         let cmd = RenderCmd::try_parse_from([
             "render",
@@ -176,6 +177,8 @@ fn acceptance(args: &Args, work: &Work) -> anyhow::Result<String> {
             "3",
             "--depth-sensor",
             &sensor,
+            "--intrinsics",
+            &camera,
         ])?;
         crate::render::run(cmd.args)?;
     }

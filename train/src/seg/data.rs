@@ -51,7 +51,7 @@ pub fn render_frame(set: &ObjectSet, seed: u64, target: &mut RenderTarget) -> an
 /// bounds the segmenter's training speed on two cores). Plain scenes keep the
 /// full resolution of the runs before randomisation.
 pub fn render_camera(sampler: &SamplerConfig) -> Intrinsics {
-    let k = Intrinsics::YCB_VIDEO;
+    let k = sampler.intrinsics;
     if !sampler.randomize.is_on() {
         return k;
     }
