@@ -9,6 +9,10 @@
 //!   (and optionally `/tf`).
 //!
 //! Message types are defined here field by field ([`msg`]). See docs/ROS2.md.
+//!
+//! It may touch the wire contract (`fusepose-client`) and the object sets
+//! (`fusepose-scene`, for names and boxes); never the daemon, the estimator
+//! or the trainer, and nothing of the daemon depends on it.
 
 pub mod camera_bridge;
 pub mod clock;

@@ -85,10 +85,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         a.out = work.pose();
         a.seg_masks = 0.0;
         a.checkpoint_dir = work.dir.join("1-checkpoints");
-        if a.resume.is_none() && a.warm_start.is_none() && !a.cold {
-            let trunk = crate::weights::resolve_weights(None)?;
-            println!("   warm start from {} (--cold for random weights)", trunk.display());
-            a.warm_start = Some(trunk);
+        a.warm_start = trunk(args)?;
+        if let Some(t) = &a.warm_start {
+            println!("   warm start from {} (--cold for random weights)", t.display());
         }
         // An interrupted run continues from its last checkpoint with what is left of the stage.
         let ckpt = a.checkpoint_dir.join("checkpoint.safetensors");
@@ -112,8 +111,12 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         a.minutes = Some(seg_min);
         a.out = work.seg();
         a.resume = None;
-        a.warm_start = None;
-        a.lr = 2e-3;
+        // The shipped segmenter's encoder and decoder carry over; a fresh head learns these classes.
+        a.warm_start = trunk(args)?.filter(|t| fusepose_estimator::seg::file::SegFile::read(t).is_ok());
+        a.lr = if a.warm_start.is_some() { 1e-3 } else { 2e-3 };
+        if let Some(t) = &a.warm_start {
+            println!("   segmenter warm start from {}", t.display());
+        }
         a.checkpoint_dir = work.dir.join("2-checkpoints");
         super::run(a)?;
         let tmp = work.dir.join("2-pose-seg.tmp.safetensors");
@@ -142,6 +145,18 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     println!("{report}");
     println!("== report written to {}", report_path.display());
     Ok(())
+}
+
+/// The trained file new networks start from: `--warm-start`, else the shipped
+/// weights; none with `--cold` or `--resume` (which continues its own file).
+fn trunk(args: &Args) -> anyhow::Result<Option<PathBuf>> {
+    if args.cold || args.resume.is_some() {
+        return Ok(None);
+    }
+    match &args.warm_start {
+        Some(path) => Ok(Some(path.clone())),
+        None => crate::weights::resolve_weights(None).map(Some),
+    }
 }
 
 /// Training seconds recorded in a pose-network file.

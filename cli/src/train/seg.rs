@@ -92,6 +92,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         minutes: args.minutes,
         steps: args.steps,
         resume: args.resume.clone(),
+        warm_start: args.warm_start.clone(),
         arch,
         batch: args.batch,
         lr: args.lr,

@@ -16,6 +16,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::{Device, Tensor, TensorData};
+use burn::store::ModuleSnapshot;
 use fusepose_estimator::net::meta::{TrainRecord, object_entries};
 use fusepose_estimator::seg::{SegConfig, SegEngine};
 use fusepose_scene::ObjectSet;
@@ -41,6 +42,11 @@ pub struct SegTrainConfig {
     pub steps: Option<u64>,
     /// Continue from a checkpoint or weight file (its architecture wins over `arch`).
     pub resume: Option<PathBuf>,
+    /// A fresh run for other objects starts from this trained segmenter (a
+    /// segmenter file or a pose-network file with one embedded): its
+    /// architecture and every tensor whose shape does not depend on the
+    /// number of classes; the class head starts fresh ([`warm_start`]).
+    pub warm_start: Option<PathBuf>,
     /// Architecture of a fresh run; `None`: [`SegConfig::new`] for the object count.
     pub arch: Option<SegConfig>,
     /// Frames per step.
@@ -78,6 +84,7 @@ impl Default for SegTrainConfig {
             minutes: Some(30.0),
             steps: None,
             resume: None,
+            warm_start: None,
             arch: None,
             batch: 8,
             lr: 2e-3,
@@ -161,6 +168,46 @@ fn recv(stream: &mut SegStream) -> anyhow::Result<SegSample> {
 }
 
 /// Trains the segmenter, validates it through the engine and writes `cfg.out`.
+/// A segmenter for `num_classes` classes with the architecture of the one
+/// in `path` and every tensor of it whose name and shape fit copied; returns
+/// it with its config, the number of copied tensors and the names left fresh.
+pub fn warm_start(
+    path: &std::path::Path,
+    num_classes: usize,
+    offsets: bool,
+    device: &Device,
+) -> anyhow::Result<(SegNet, SegConfig, usize, Vec<String>)> {
+    let source =
+        store::load(path, device).with_context(|| format!("reading the warm-start segmenter {}", path.display()))?;
+    let mut source_net = source.net;
+    let mut arch = SegConfig { num_classes, ..source.file.config.clone() };
+    if offsets && !arch.offsets {
+        arch.offsets = true;
+        source_net = source_net.with_offset_head(&arch, device);
+    }
+    arch.offsets = offsets;
+    arch.validate().map_err(|m| anyhow::anyhow!("architecture: {m}"))?;
+    let mut net = SegNet::new(&arch, device);
+    let target: std::collections::HashMap<String, Vec<usize>> = net
+        .collect(None, None, false)
+        .into_iter()
+        .map(|t| (t.name.clone(), t.shape.iter().map(|&d| d as usize).collect()))
+        .collect();
+    let (fits, misfits): (Vec<_>, Vec<_>) = source_net.collect(None, None, false).into_iter().partition(|t| {
+        target.get(&t.name.clone()) == Some(&t.shape.iter().map(|&d| d as usize).collect::<Vec<usize>>())
+    });
+    if fits.is_empty() {
+        bail!("{}: no segmenter tensor fits the new segmenter", path.display());
+    }
+    let copied = fits.len();
+    let result = net.apply(fits, None, None, false);
+    if !result.errors.is_empty() {
+        bail!("{}: warm start failed: {:?}", path.display(), result.errors);
+    }
+    let fresh: Vec<String> = misfits.iter().map(|t| t.name.clone()).collect();
+    Ok((net, arch, copied, fresh))
+}
+
 pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     let set = cfg.objects.clone();
     if set.is_empty() {
@@ -213,6 +260,17 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
                 net = net.with_offset_head(&arch, &device);
             }
             (net, arch, record)
+        }
+        None if cfg.warm_start.is_some() => {
+            let path = cfg.warm_start.as_ref().expect("checked");
+            let (net, arch, copied, fresh) = warm_start(path, set.len(), cfg.offsets, &device)?;
+            log.line(&format!(
+                "# warm start from {}: {copied} tensors copied, {} fresh ({})",
+                path.display(),
+                fresh.len(),
+                fresh.join(", ")
+            ));
+            (net, arch, TrainRecord { seed: cfg.seed, ..TrainRecord::default() })
         }
         None => {
             let mut arch = cfg.arch.clone().unwrap_or_else(|| SegConfig::new(set.len()));
@@ -375,4 +433,39 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         loss_curve: curve,
         step_ms: step_time * 1000.0,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn warm_start_copies_the_trunk_and_leaves_the_class_head_fresh() {
+        let device = Device::default();
+        let eight = SegConfig { offsets: true, ..SegConfig::new(8) };
+        let source = SegNet::new(&eight, &device);
+        let dir = std::env::temp_dir().join(format!("fusepose-seg-warm-{}", std::process::id()));
+        let path = dir.join("seg8.safetensors");
+        let objects = object_entries(&builtin_objects());
+        store::save(&source, &eight, &objects, &TrainRecord::default(), &serde_json::json!({}), &path).unwrap();
+
+        let (net, arch, copied, fresh) = warm_start(&path, 3, true, &device).unwrap();
+        assert_eq!((arch.num_classes, arch.offsets), (3, true));
+        assert!(copied > 0 && !fresh.is_empty(), "copied {copied}, fresh {fresh:?}");
+        assert!(fresh.iter().all(|n| n.starts_with("head")), "only the class head is class-sized: {fresh:?}");
+        let src: std::collections::HashMap<String, Vec<u8>> = source
+            .collect(None, None, false)
+            .into_iter()
+            .map(|t| (t.name.clone(), t.to_bytes().unwrap().to_vec()))
+            .collect();
+        for t in net.collect(None, None, false) {
+            let now = t.to_bytes().unwrap().to_vec();
+            if fresh.contains(&t.name) {
+                assert_ne!(src.get(&t.name).map(Vec::len), Some(now.len()), "{} is class-sized", t.name);
+            } else {
+                assert_eq!(Some(&now), src.get(&t.name), "{} copied", t.name);
+            }
+        }
+        let _ = std::fs::remove_dir_all(dir);
+    }
 }
