@@ -44,7 +44,7 @@ def main():
         ax.plot([p[0] for p in pts], [p[1] for p in pts], "-o", color=colour, label=f"{name}: ADD-S AUC")
         ax.plot([p[0] for p in pts], [p[2] for p in pts], "--s", color=colour, label=f"{name}: ADD(S) AUC")
     ax.set_xlabel("training wall time, minutes (2 cores)")
-    ax.set_ylabel("validation AUC, % (pose net + 2 refiner iterations, true masks)")
+    ax.set_ylabel("validation AUC, % (refined, true masks)")
     ax.set_ylim(0, 100)
     ax.grid(alpha=0.3)
     ax.legend(fontsize=8, loc="lower right")

@@ -145,10 +145,10 @@ pub fn run(args: &CameraBridgeArgs) -> anyhow::Result<()> {
     let stall = Duration::from_secs_f64(args.stall_s.max(0.1));
     loop {
         // Edge-triggered readiness: a short timeout also covers anything that slipped past an edge.
-        if let Err(e) = poll.poll(&mut events, Some(Duration::from_millis(50))) {
-            if e.kind() != std::io::ErrorKind::Interrupted {
-                return Err(e).context("waiting for DDS data");
-            }
+        if let Err(e) = poll.poll(&mut events, Some(Duration::from_millis(50)))
+            && e.kind() != std::io::ErrorKind::Interrupted
+        {
+            return Err(e).context("waiting for DDS data");
         }
         let now = Instant::now();
         loop {
@@ -204,10 +204,10 @@ pub fn run(args: &CameraBridgeArgs) -> anyhow::Result<()> {
             let n = pairs.len() - 1;
             log.warn("backlog", || format!("{n} older frame pair(s) skipped: the bridge fell behind"));
         }
-        if let Some(pair) = pairs.pop() {
-            if send(&mut out, &pair, intrinsics.as_ref(), &mut clock, &mut log, args)? {
-                last_sent = now;
-            }
+        if let Some(pair) = pairs.pop()
+            && send(&mut out, &pair, intrinsics.as_ref(), &mut clock, &mut log, args)?
+        {
+            last_sent = now;
         }
         if now.duration_since(last_sent) >= stall {
             let age = |i: usize| match inputs.last[i] {

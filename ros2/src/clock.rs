@@ -14,11 +14,13 @@ use std::time::Duration;
 /// How often the offset is measured again.
 const REFRESH: Duration = Duration::from_secs(1);
 
+// `time_t` and `c_long` are i32 on 32-bit targets: the conversions are not useless there.
+#[allow(clippy::useless_conversion)]
 fn read(clock: libc::clockid_t) -> i64 {
     let mut ts = libc::timespec { tv_sec: 0, tv_nsec: 0 };
     // SAFETY: `ts` is a valid, writable timespec; both clocks exist on Linux.
     unsafe { libc::clock_gettime(clock, &mut ts) };
-    ts.tv_sec as i64 * 1_000_000_000 + ts.tv_nsec as i64
+    i64::from(ts.tv_sec) * 1_000_000_000 + i64::from(ts.tv_nsec)
 }
 
 /// `CLOCK_REALTIME − CLOCK_MONOTONIC`, ns, from the tightest of 8 bracketed reads.

@@ -57,7 +57,7 @@ pub fn pinhole(info: &CameraInfo) -> Result<Pinhole, Rejected> {
     }
     let k = info.k;
     let (fx, fy, cx, cy) = (k[0], k[4], k[2], k[5]);
-    if !(FOCAL_RANGE_PX.contains(&fx) && FOCAL_RANGE_PX.contains(&fy)) || !cx.is_finite() || !cy.is_finite() {
+    if !(FOCAL_RANGE_PX.contains(&fx) && FOCAL_RANGE_PX.contains(&fy) && cx.is_finite() && cy.is_finite()) {
         return Err(reject(
             "intrinsics",
             format!("CameraInfo has unusable intrinsics k = {k:?} (fx, fy must lie in {FOCAL_RANGE_PX:?} px)"),

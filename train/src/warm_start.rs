@@ -37,7 +37,7 @@ pub fn warm_start(net: &mut FusionNet, path: &Path) -> anyhow::Result<WarmStart>
     let mut matching = Vec::new();
     let mut fresh = Vec::new();
     for t in net.collect(None, None, false) {
-        let dims: Vec<usize> = t.shape.iter().map(|&d| d as usize).collect();
+        let dims: Vec<usize> = t.shape.iter().copied().collect();
         if source.get(&t.name) == Some(&dims) {
             matching.push(t.name);
         } else {

@@ -59,8 +59,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let minutes = args.minutes.context(
         "--stage all needs --minutes (the whole budget, e.g. --minutes 60; stages get 47.5 / 23.75 / 23.75 % of it, the rest is for validation and the report)",
     )?;
-    if !(minutes > 0.0) {
-        anyhow::bail!("--minutes must be positive, got {minutes}");
+    if !minutes.is_finite() || minutes <= 0.0 {
+        anyhow::bail!("--minutes must be a positive number of minutes, got {minutes}");
     }
     let stem = args.out.file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
     let work = Work { dir: args.checkpoint_dir.join(format!("{stem}-stages")) };

@@ -191,11 +191,12 @@ pub fn warm_start(
     let target: std::collections::HashMap<String, Vec<usize>> = net
         .collect(None, None, false)
         .into_iter()
-        .map(|t| (t.name.clone(), t.shape.iter().map(|&d| d as usize).collect()))
+        .map(|t| (t.name.clone(), t.shape.iter().copied().collect()))
         .collect();
-    let (fits, misfits): (Vec<_>, Vec<_>) = source_net.collect(None, None, false).into_iter().partition(|t| {
-        target.get(&t.name.clone()) == Some(&t.shape.iter().map(|&d| d as usize).collect::<Vec<usize>>())
-    });
+    let (fits, misfits): (Vec<_>, Vec<_>) = source_net
+        .collect(None, None, false)
+        .into_iter()
+        .partition(|t| target.get(&t.name) == Some(&t.shape.iter().copied().collect::<Vec<usize>>()));
     if fits.is_empty() {
         bail!("{}: no segmenter tensor fits the new segmenter", path.display());
     }
