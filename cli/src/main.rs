@@ -56,15 +56,8 @@ enum Command {
 }
 
 fn main() {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("FUSEPOSE_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(fusepose_ros2::DEFAULT_LOG_FILTER)),
-        )
-        .with_writer(std::io::stderr)
-        // No colour codes in log files (e.g. the demo's logs/*.log).
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+    // The bridges' logging setup (FUSEPOSE_LOG; no colour codes in log files such as the demo's logs/*.log).
+    fusepose_ros2::init_logging();
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Bridge(a) => bridge::run(a),

@@ -37,6 +37,20 @@ pub use pose_bridge::PoseBridgeArgs;
 /// larger than one UDP datagram (each image), which says nothing to a user.
 pub const DEFAULT_LOG_FILTER: &str = "info,rustdds=error,ros2_client=warn";
 
+/// Logs to stderr, filtered by `FUSEPOSE_LOG` (else [`DEFAULT_LOG_FILTER`]),
+/// without colour codes when stderr is not a terminal (log files). The
+/// `fusepose` command line and `fusepose-ros2` log alike.
+pub fn init_logging() {
+    tracing_subscriber::fmt()
+        .with_env_filter(
+            tracing_subscriber::EnvFilter::try_from_env("FUSEPOSE_LOG")
+                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(DEFAULT_LOG_FILTER)),
+        )
+        .with_writer(std::io::stderr)
+        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
+        .init();
+}
+
 /// The bridges, as subcommands of `fusepose bridge` and of `fusepose-ros2`.
 #[derive(Debug, clap::Subcommand)]
 pub enum BridgeCommand {

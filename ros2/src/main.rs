@@ -12,14 +12,7 @@ struct Cli {
 }
 
 fn main() {
-    tracing_subscriber::fmt()
-        .with_env_filter(
-            tracing_subscriber::EnvFilter::try_from_env("FUSEPOSE_LOG")
-                .unwrap_or_else(|_| tracing_subscriber::EnvFilter::new(fusepose_ros2::DEFAULT_LOG_FILTER)),
-        )
-        .with_writer(std::io::stderr)
-        .with_ansi(std::io::IsTerminal::is_terminal(&std::io::stderr()))
-        .init();
+    fusepose_ros2::init_logging();
     let cli = Cli::parse();
     if let Err(e) = fusepose_ros2::run(&cli.command) {
         eprintln!("error: {e:#}");
