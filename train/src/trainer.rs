@@ -171,7 +171,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
                 .with_context(|| format!("reading the warm-start file {}", path.display()))?;
             let cfg = crate::warm_start::config_for(&source.config, set.len());
             let mut net = FusionNet::new(&cfg, &device);
-            let w = crate::warm_start::warm_start(&mut net, path)?;
+            let w = crate::warm_start::warm_start(&mut net, path, &device)?;
             log.line(&format!(
                 "# warm start from {}: {} tensors copied, {} fresh ({})",
                 path.display(),

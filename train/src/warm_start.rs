@@ -4,11 +4,12 @@
 //! shape depends on the number of classes (the per-class heads) stay freshly
 //! initialised and are learned from the new objects.
 
-use std::collections::HashMap;
+use std::collections::{HashMap, HashSet};
 use std::path::Path;
 
 use anyhow::{Context, bail};
-use burn::store::{ModuleSnapshot, SafetensorsStore};
+use burn::prelude::Device;
+use burn::store::ModuleSnapshot;
 use fusepose_estimator::net::NetConfig;
 
 use crate::model::FusionNet;
@@ -28,38 +29,44 @@ pub fn config_for(source: &NetConfig, num_classes: usize) -> NetConfig {
     NetConfig { num_classes, ..source.clone() }
 }
 
-/// Copies every tensor of `path` whose name and shape match one of `net`'s.
-pub fn warm_start(net: &mut FusionNet, path: &Path) -> anyhow::Result<WarmStart> {
-    let bytes = std::fs::read(path).with_context(|| format!("reading {}", path.display()))?;
-    let (_, meta) = safetensors::SafeTensors::read_metadata(&bytes)
-        .map_err(|e| anyhow::anyhow!("{}: not a safetensors file ({e})", path.display()))?;
-    let source: HashMap<String, Vec<usize>> = meta.tensors().into_iter().map(|(n, i)| (n, i.shape.clone())).collect();
-    let mut matching = Vec::new();
-    let mut fresh = Vec::new();
-    for t in net.collect(None, None, false) {
-        let dims: Vec<usize> = t.shape.iter().copied().collect();
-        if source.get(&t.name) == Some(&dims) {
-            matching.push(t.name);
-        } else {
-            fresh.push(t.name);
-        }
+/// Copies every tensor of the pose-network file `path` whose name and shape
+/// match one of `net`'s.
+pub fn warm_start(net: &mut FusionNet, path: &Path, device: &Device) -> anyhow::Result<WarmStart> {
+    let source =
+        crate::store::load(path, device).with_context(|| format!("reading the warm-start file {}", path.display()))?;
+    copy_fitting(net, &source.net, path)
+}
+
+/// Copies into `target` every tensor of `source` (read from `origin`) whose
+/// name and shape match one of its own; the others keep their fresh values.
+pub fn copy_fitting<T: ModuleSnapshot, S: ModuleSnapshot>(
+    target: &mut T,
+    source: &S,
+    origin: &Path,
+) -> anyhow::Result<WarmStart> {
+    let shapes: HashMap<String, Vec<usize>> =
+        target.collect(None, None, false).iter().map(|t| (t.name.clone(), t.shape.iter().copied().collect())).collect();
+    let fits: Vec<_> = source
+        .collect(None, None, false)
+        .into_iter()
+        .filter(|t| shapes.get(&t.name).is_some_and(|s| s.iter().eq(t.shape.iter())))
+        .collect();
+    if fits.is_empty() {
+        bail!("{}: no tensor fits the network (not a fusepose file of this kind?)", origin.display());
     }
-    if matching.is_empty() {
-        bail!("{}: no tensor matches the network (not a fusepose pose-network file?)", path.display());
-    }
-    let patterns: Vec<String> = matching.iter().map(|n| format!("^{}$", n.replace('.', r"\."))).collect();
-    let mut store = SafetensorsStore::from_file(path).with_regexes(patterns).allow_partial(true);
-    let result = net.load_from(&mut store).map_err(|e| anyhow::anyhow!("loading {}: {e:?}", path.display()))?;
+    let copied: HashSet<String> = fits.iter().map(|t| t.name.clone()).collect();
+    let result = target.apply(fits, None, None, false);
     if !result.errors.is_empty() {
-        bail!("{}: warm start failed: {:?}", path.display(), result.errors);
+        bail!("{}: warm start failed: {:?}", origin.display(), result.errors);
     }
-    Ok(WarmStart { copied: result.applied.len(), fresh })
+    let mut fresh: Vec<String> = shapes.into_keys().filter(|n| !copied.contains(n)).collect();
+    fresh.sort();
+    Ok(WarmStart { copied: copied.len(), fresh })
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use burn::prelude::Device;
     use fusepose_estimator::net::meta::TrainRecord;
 
     #[test]
@@ -69,12 +76,13 @@ mod tests {
         let source = FusionNet::new(&eight, &device);
         let dir = std::env::temp_dir().join(format!("fusepose-warm-{}", std::process::id()));
         let path = dir.join("eight.safetensors");
-        crate::store::save(&source, &eight, &[], &TrainRecord::default(), &path).unwrap();
+        let objects = fusepose_estimator::net::meta::object_entries(&fusepose_scene::builtin::builtin_objects());
+        crate::store::save(&source, &eight, &objects, &TrainRecord::default(), &path).unwrap();
 
         let five = config_for(&eight, 5);
         let mut net = FusionNet::new(&five, &device);
         let before = net.collect(None, None, false);
-        let w = warm_start(&mut net, &path).unwrap();
+        let w = warm_start(&mut net, &path, &device).unwrap();
         let after = net.collect(None, None, false);
         let src: HashMap<String, Vec<u8>> = source
             .collect(None, None, false)

@@ -80,16 +80,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         println!("== stage 1/4 done before: {}", work.pose().display());
     } else {
         println!("== stage 1/4: pose net + refiner, {pose_min:.1} min");
-        let mut a = args.clone();
-        a.stage = Some(StageArg::Both);
-        a.minutes = Some(pose_min);
-        a.out = work.pose();
+        let mut a = stage_args(args, StageArg::Both, pose_min, work.pose(), work.dir.join("1-checkpoints"));
         a.seg_masks = 0.0;
-        a.checkpoint_dir = work.dir.join("1-checkpoints");
-        a.warm_start = trunk(args)?;
-        if let Some(t) = &a.warm_start {
-            println!("   warm start from {} (--cold for random weights)", t.display());
-        }
         // An interrupted run continues from its last checkpoint with what is left of the stage.
         let ckpt = a.checkpoint_dir.join("checkpoint.safetensors");
         if ckpt.exists() {
@@ -98,6 +90,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             a.minutes = Some((pose_min - used).max(0.5));
             println!("   continuing from {} ({used:.1} min done)", ckpt.display());
             (a.resume, a.warm_start) = (Some(ckpt), None);
+        } else {
+            a.warm_start = trunk(args)?;
+            if let Some(t) = &a.warm_start {
+                println!("   warm start from {} (--cold for random weights)", t.display());
+            }
         }
         super::run(a)?;
     }
@@ -107,10 +104,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         println!("== stage 2/4 done before: {}", work.pose_seg().display());
     } else {
         println!("== stage 2/4: segmenter, {seg_min:.1} min");
-        let mut a = args.clone();
-        a.stage = Some(StageArg::Seg);
-        a.minutes = Some(seg_min);
-        a.out = work.seg();
+        let mut a = stage_args(args, StageArg::Seg, seg_min, work.seg(), work.dir.join("2-checkpoints"));
         a.resume = None;
         // The shipped segmenter's encoder and decoder carry over; a fresh head learns these classes.
         a.warm_start = trunk(args)?.filter(|t| fusepose_estimator::seg::file::SegFile::read(t).is_ok());
@@ -118,7 +112,6 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         if let Some(t) = &a.warm_start {
             println!("   segmenter warm start from {}", t.display());
         }
-        a.checkpoint_dir = work.dir.join("2-checkpoints");
         super::run(a)?;
         let tmp = work.dir.join("2-pose-seg.tmp.safetensors");
         std::fs::copy(work.pose(), &tmp).with_context(|| format!("copying {}", work.pose().display()))?;
@@ -131,14 +124,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         println!("== stage 3/4 done before: {}", args.out.display());
     } else {
         println!("== stage 3/4: fine-tune on segmenter masks, {tune_min:.1} min");
-        let mut a = args.clone();
-        a.stage = Some(StageArg::Both);
-        a.minutes = Some(tune_min);
+        let mut a = stage_args(args, StageArg::Both, tune_min, args.out.clone(), work.dir.join("3-checkpoints"));
         a.resume = Some(work.pose_seg());
         a.warm_start = None;
         a.seg_masks = 0.5;
         a.lr = args.lr.min(3e-4);
-        a.checkpoint_dir = work.dir.join("3-checkpoints");
         super::run(a)?;
         std::fs::write(work.tuned(), args.out.display().to_string())?;
     }
@@ -151,6 +141,11 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     println!("{report}");
     println!("== report written to {}", report_path.display());
     Ok(())
+}
+
+/// `args` for one stage: what to train, its minutes, its output and checkpoint folder.
+fn stage_args(args: &Args, stage: StageArg, minutes: f64, out: PathBuf, checkpoints: PathBuf) -> Args {
+    Args { stage: Some(stage), minutes: Some(minutes), out, checkpoint_dir: checkpoints, ..args.clone() }
 }
 
 /// The trained file new networks start from: `--warm-start`, else the shipped

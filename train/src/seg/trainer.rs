@@ -16,7 +16,6 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::{Device, Tensor, TensorData};
-use burn::store::ModuleSnapshot;
 use fusepose_estimator::net::meta::{TrainRecord, object_entries};
 use fusepose_estimator::seg::{SegConfig, SegEngine};
 use fusepose_scene::ObjectSet;
@@ -27,6 +26,7 @@ use super::loss::{class_weights, offset_l1, weighted_cross_entropy};
 use super::model::SegNet;
 use super::store;
 use super::validate::{self, SegValidation};
+use crate::warm_start::WarmStart;
 
 /// Everything a segmenter training run needs. `Default` trains the built-in
 /// objects for 30 minutes into `seg.safetensors`.
@@ -169,14 +169,15 @@ fn recv(stream: &mut SegStream) -> anyhow::Result<SegSample> {
 
 /// Trains the segmenter, validates it through the engine and writes `cfg.out`.
 /// A segmenter for `num_classes` classes with the architecture of the one
-/// in `path` and every tensor of it whose name and shape fit copied; returns
-/// it with its config, the number of copied tensors and the names left fresh.
+/// in `path` (a segmenter file or a pose-network file with one embedded) and
+/// every tensor of it whose name and shape fit copied
+/// ([`crate::warm_start::copy_fitting`]); the class head stays fresh.
 pub fn warm_start(
     path: &std::path::Path,
     num_classes: usize,
     offsets: bool,
     device: &Device,
-) -> anyhow::Result<(SegNet, SegConfig, usize, Vec<String>)> {
+) -> anyhow::Result<(SegNet, SegConfig, WarmStart)> {
     let source =
         store::load(path, device).with_context(|| format!("reading the warm-start segmenter {}", path.display()))?;
     let mut source_net = source.net;
@@ -188,25 +189,8 @@ pub fn warm_start(
     arch.offsets = offsets;
     arch.validate().map_err(|m| anyhow::anyhow!("architecture: {m}"))?;
     let mut net = SegNet::new(&arch, device);
-    let target: std::collections::HashMap<String, Vec<usize>> = net
-        .collect(None, None, false)
-        .into_iter()
-        .map(|t| (t.name.clone(), t.shape.iter().copied().collect()))
-        .collect();
-    let (fits, misfits): (Vec<_>, Vec<_>) = source_net
-        .collect(None, None, false)
-        .into_iter()
-        .partition(|t| target.get(&t.name) == Some(&t.shape.iter().copied().collect::<Vec<usize>>()));
-    if fits.is_empty() {
-        bail!("{}: no segmenter tensor fits the new segmenter", path.display());
-    }
-    let copied = fits.len();
-    let result = net.apply(fits, None, None, false);
-    if !result.errors.is_empty() {
-        bail!("{}: warm start failed: {:?}", path.display(), result.errors);
-    }
-    let fresh: Vec<String> = misfits.iter().map(|t| t.name.clone()).collect();
-    Ok((net, arch, copied, fresh))
+    let copied = crate::warm_start::copy_fitting(&mut net, &source_net, path)?;
+    Ok((net, arch, copied))
 }
 
 pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
@@ -264,12 +248,13 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         }
         None if cfg.warm_start.is_some() => {
             let path = cfg.warm_start.as_ref().expect("checked");
-            let (net, arch, copied, fresh) = warm_start(path, set.len(), cfg.offsets, &device)?;
+            let (net, arch, w) = warm_start(path, set.len(), cfg.offsets, &device)?;
             log.line(&format!(
-                "# warm start from {}: {copied} tensors copied, {} fresh ({})",
+                "# warm start from {}: {} tensors copied, {} fresh ({})",
                 path.display(),
-                fresh.len(),
-                fresh.join(", ")
+                w.copied,
+                w.fresh.len(),
+                w.fresh.join(", ")
             ));
             (net, arch, TrainRecord { seed: cfg.seed, ..TrainRecord::default() })
         }
@@ -438,6 +423,8 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
 
 #[cfg(test)]
 mod tests {
+    use burn::store::ModuleSnapshot;
+
     use super::*;
 
     #[test]
@@ -450,7 +437,8 @@ mod tests {
         let objects = object_entries(&builtin_objects());
         store::save(&source, &eight, &objects, &TrainRecord::default(), &serde_json::json!({}), &path).unwrap();
 
-        let (net, arch, copied, fresh) = warm_start(&path, 3, true, &device).unwrap();
+        let (net, arch, w) = warm_start(&path, 3, true, &device).unwrap();
+        let (copied, fresh) = (w.copied, w.fresh);
         assert_eq!((arch.num_classes, arch.offsets), (3, true));
         assert!(copied > 0 && !fresh.is_empty(), "copied {copied}, fresh {fresh:?}");
         assert!(fresh.iter().all(|n| n.starts_with("head")), "only the class head is class-sized: {fresh:?}");
