@@ -72,6 +72,11 @@ impl ChildProcess {
         }
     }
 
+    /// The child's process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
     /// Asks the child to stop with SIGINT (the daemon then writes its summary).
     pub fn interrupt(&self) {
         // SAFETY: plain kill(2) on our own child's pid.

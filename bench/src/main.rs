@@ -55,6 +55,12 @@ enum Command {
         #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
         args: Vec<String>,
     },
+    /// The all-cameras consumer of `e2e --cameras N` (internal).
+    #[command(hide = true)]
+    E2eConsumerAll {
+        #[arg(trailing_var_arg = true, allow_hyphen_values = true)]
+        args: Vec<String>,
+    },
 }
 
 fn main() -> anyhow::Result<()> {
@@ -94,6 +100,7 @@ fn main() -> anyhow::Result<()> {
         Command::E2eDaemon { args } => e2e::processes::daemon_main(&args)?,
         Command::E2eProducer { args } => e2e::processes::producer_main(&args)?,
         Command::E2eConsumer { args } => e2e::processes::consumer_main(&args)?,
+        Command::E2eConsumerAll { args } => e2e::processes::consumer_all_main(&args)?,
     }
     Ok(())
 }

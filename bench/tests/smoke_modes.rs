@@ -79,12 +79,42 @@ fn e2e_smoke_poses_frames_through_daemon_and_consumer() {
         "--out",
         out.to_str().unwrap(),
     ]);
-    let v = row_numbers(&text, "30.0");
-    // achieved, deadline, sent, posed, skipped, missed, late, degraded, p50, p99, p99.9, max, iters
-    assert!(v.len() == 13, "{v:?}");
+    let v = row_numbers(&text, "cam0");
+    // fps, achieved, deadline, sent, posed, skipped, missed, late, degraded, p50, p99, p99.9, max, iters
+    assert!(v.len() == 14 && v[0] == 30.0, "{v:?}");
+    let v = &v[1..];
     assert!(v[0] > 0.0 && v[3] > 0.0 && v[8] > 0.0 && v[8] <= v[11], "{v:?}");
     assert!(text.contains("5.00 objects per message"), "every message poses the 5 labelled objects:\n{text}");
     assert!(out.join("e2e.png").exists() && out.join("e2e.hlog").exists());
+    let _ = std::fs::remove_dir_all(out);
+}
+
+#[test]
+fn e2e_smoke_serves_two_cameras_and_their_cell() {
+    let Some(weights) = weights() else { return };
+    let out = out_dir("e2e2");
+    let text = bench(&[
+        "e2e",
+        "--smoke",
+        "--cameras",
+        "2",
+        "--fps",
+        "20",
+        "--weights",
+        &weights,
+        "--estimator-extra",
+        "verify = \"flag\"",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    for camera in ["cam0", "cam1"] {
+        let v = row_numbers(&text, camera);
+        assert!(v.len() == 14 && v[4] > 0.0, "{camera} posed frames: {v:?}\n{text}");
+        assert!(text.contains(&format!("{camera} 20 fps:")) && text.contains("messages of another camera 0"), "{text}");
+    }
+    let line = text.lines().find(|l| l.contains("all-cameras consumer")).unwrap_or_else(|| panic!("{text}"));
+    assert!(line.contains("of a wrong camera 0") && !line.contains("cell messages 0 "), "{line}");
+    assert!(line.contains("daemon RSS at the end"), "{line}");
     let _ = std::fs::remove_dir_all(out);
 }
 

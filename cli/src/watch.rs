@@ -3,8 +3,10 @@
 //!
 //! Names are those of the built-in object set (`class <id>` beyond it).
 //! The iceoryx2 namespace comes from `FUSEPOSE_IOX2_ROOT` / `FUSEPOSE_IOX2_PREFIX`.
-//! `--overlay DIR` also writes a PNG per answered frame ([`overlay`]).
+//! `--overlay DIR` also writes a PNG per answered frame ([`overlay`]);
+//! `--cell` prints the cell's fused objects instead ([`cell`]).
 
+mod cell;
 mod overlay;
 
 use std::time::{Duration, Instant};
@@ -16,6 +18,10 @@ pub struct Args {
     /// Camera name.
     #[arg(long, default_value = "cam0")]
     pub name: String,
+    /// Print the cell's objects instead (`fusepose/cell/poses`: every camera's
+    /// poses in the cell frame, one entry per object).
+    #[arg(long, conflicts_with_all = ["overlay", "name"])]
+    pub cell: bool,
     /// One JSON object per message instead of text.
     #[arg(long)]
     pub json: bool,
@@ -154,6 +160,9 @@ fn json(msg: &PoseMessage) -> String {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("fusepose-watch"))?;
+    if args.cell {
+        return cell::run(&ipc, args.json, args.count, args.idle_timeout_s.map(Duration::from_secs_f64));
+    }
     let mut consumer = Consumer::open(&ipc, &args.name)?;
     // With --overlay: a frame subscriber next to the daemon's, and the writer keeping recent frames.
     let mut overlay = match &args.overlay {

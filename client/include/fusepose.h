@@ -2,7 +2,7 @@
  * fusepose.h - the fusepose wire types for C and C++ (C99, no dependencies).
  *
  * Hand-written mirror of the #[repr(C)] types in fusepose-client
- * (client/src/frame_header.rs, pose_message.rs, stats.rs). The Rust test
+ * (client/src/frame_header.rs, pose_message.rs, stats.rs, cell_message.rs). The Rust test
  * client/tests/c_header.rs compiles a C program against this header and
  * compares every struct size, every field offset and size, every field name
  * and every constant with the Rust definitions, so the two cannot drift apart
@@ -19,6 +19,9 @@
  *   fusepose/camera/<name>/poses   pub-sub, payload fp_pose_message ("fusepose::PoseMessage"),
  *                                  plus an event service of the same name
  *   fusepose/camera/<name>/stats   request-response fp_stats_request -> fp_stats_snapshot
+ * and of the cell (all cameras of one daemon, in the cell frame):
+ *   fusepose/cell/poses            pub-sub, payload fp_cell_pose_message ("fusepose::CellPoseMessage"),
+ *                                  plus an event service of the same name
  */
 #ifndef FUSEPOSE_H
 #define FUSEPOSE_H
@@ -67,6 +70,13 @@ extern "C" {
 #define FUSEPOSE_POSE_VERIFIED (1u << 0)              /* passed verification (scores are NaN when it did not run) */
 #define FUSEPOSE_POSE_FROM_INSTANCE_LABELS (1u << 1)  /* mask from the frame's own instance-label plane */
 
+/* Cell poses: most objects per message, most views listed per object. */
+#define FUSEPOSE_MAX_CELL_OBJECTS 64
+#define FUSEPOSE_MAX_CELL_VIEWS 4
+/* fp_cell_object.flags bits */
+#define FUSEPOSE_CELL_VERIFIED (1u << 0)                 /* every listed view passed verification */
+#define FUSEPOSE_CELL_ROTATION_FROM_BEST_VIEW (1u << 1)  /* fusion "mean": views too far in rotation left out */
+
 /* Stage indices into stage_ns and the stats arrays (end-to-end is index 6 in stats). */
 #define FUSEPOSE_STAGE_INGEST 0
 #define FUSEPOSE_STAGE_SEGMENTATION 1
@@ -112,7 +122,7 @@ typedef struct fp_frame_header {
 /* One object's pose in the camera optical frame (88 bytes, no padding). */
 typedef struct fp_object_pose {
     uint16_t class_id;          /* 1-based class id in the daemon's object set */
-    uint16_t instance_id;       /* 0-based index among this frame's instances, largest mask first; not stable */
+    uint16_t instance_id;       /* per frame: index among its instances, largest mask first; tracking mode: stable id */
     uint16_t refine_iterations; /* ICP or refiner iterations */
     uint16_t flags;             /* FUSEPOSE_POSE_* bits */
     float confidence;           /* 0..1 */
@@ -179,6 +189,45 @@ typedef struct fp_stats_snapshot {
     uint64_t objects_shed;
     uint64_t frames_degraded;
 } fp_stats_snapshot;
+
+/* One camera's sight of a cell object (32 bytes). */
+typedef struct fp_cell_view {
+    uint32_t camera_id;         /* FNV-1a 32 of the camera name */
+    uint16_t instance_id;       /* the pose's instance_id in that camera's message of frame_sequence */
+    uint16_t flags;             /* that pose's FUSEPOSE_POSE_* bits */
+    float confidence;           /* that pose's confidence */
+    float offset_m;             /* distance of this view's translation from the fused one, metres */
+    uint64_t frame_sequence;    /* the camera frame the pose came from */
+    uint64_t capture_time_ns;   /* its capture time, CLOCK_MONOTONIC ns */
+} fp_cell_view;
+
+/* One object in the cell frame (216 bytes). */
+typedef struct fp_cell_object {
+    uint16_t class_id;          /* 1-based class id in the daemon's object set */
+    uint16_t view_count;        /* cameras that saw it (views[] lists up to FUSEPOSE_MAX_CELL_VIEWS) */
+    uint16_t flags;             /* FUSEPOSE_CELL_* bits */
+    uint16_t reserved;
+    float confidence;           /* the highest of the views' */
+    float spread_m;             /* largest view offset from the fused translation, metres */
+    double quaternion[4];       /* rotation object -> cell, unit, [x, y, z, w] */
+    double translation_m[3];    /* translation object -> cell, metres */
+    uint64_t newest_capture_time_ns;
+    uint64_t oldest_capture_time_ns;
+    fp_cell_view views[FUSEPOSE_MAX_CELL_VIEWS]; /* the view whose pose it carries first; unused zero */
+} fp_cell_object;
+
+/* The cell's objects after one posed camera frame (13856 bytes). */
+typedef struct fp_cell_pose_message {
+    uint16_t format_version;    /* FUSEPOSE_WIRE_VERSION */
+    uint16_t object_count;      /* valid entries at the start of objects[] */
+    uint16_t camera_count;      /* cameras whose latest poses were fresh enough to join */
+    uint16_t truncated;         /* 1 when objects did not fit (least confident left out) */
+    uint32_t trigger_camera_id; /* the camera whose frame triggered this message */
+    uint32_t reserved;
+    uint64_t sequence;          /* counts cell messages from 0 since the daemon started */
+    uint64_t published_time_ns;
+    fp_cell_object objects[FUSEPOSE_MAX_CELL_OBJECTS];
+} fp_cell_pose_message;
 
 #ifdef __cplusplus
 }

@@ -120,12 +120,16 @@ pub(crate) fn capacity_limit_of(debug: &str) -> Option<(CapacityLimit, &'static 
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum ServiceKind {
     Frames,
+    CellPoses,
     Poses,
     Stats,
     Other,
 }
 
 fn kind_of(service: &str) -> ServiceKind {
+    if service.starts_with("fusepose/cell/") {
+        return ServiceKind::CellPoses;
+    }
     match service.rsplit('/').next() {
         Some("frames") => ServiceKind::Frames,
         Some("poses") => ServiceKind::Poses,
@@ -153,6 +157,16 @@ fn advice(kind: ServiceKind, limit: CapacityLimit) -> (Option<usize>, &'static s
             "a second fuseposed serves this camera in the same iceoryx2 namespace (root path and prefix), or a \
              foreign program publishes on it",
             "run one daemon per camera (fuseposed refuses a second one itself; an older daemon may not): stop the other",
+        ),
+        (K::CellPoses, C::Publishers) => (
+            Some(l::CELL_PUBLISHERS),
+            "another fuseposed publishes the cell's poses in this iceoryx2 namespace",
+            "serve all cameras of a cell from one fuseposed, or set [cell] enabled = false in the others",
+        ),
+        (K::CellPoses, C::Subscribers) => (
+            Some(l::CELL_SUBSCRIBERS),
+            "more consumers of the cell's poses run than the service allows",
+            "close consumers you no longer need or fan poses out inside one process",
         ),
         (K::Frames, C::Subscribers) => (
             Some(l::FRAME_SUBSCRIBERS),

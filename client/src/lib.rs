@@ -11,6 +11,8 @@
 //! optical frame (x right, y down, z forward), quaternions `[x, y, z, w]`.
 
 pub mod arrival;
+mod cell_message;
+mod cell_services;
 mod clock;
 mod consumer;
 mod error;
@@ -23,6 +25,8 @@ mod services;
 mod stats;
 
 pub use arrival::{ArrivalPredictor, WaitPlan, WaitStrategy, poll_until};
+pub use cell_message::{CellFlags, CellObject, CellPoseMessage, CellView, MAX_CELL_OBJECTS, MAX_CELL_VIEWS};
+pub use cell_services::{CELL_POSES_SERVICE, CellConsumer, CellServices};
 pub use clock::monotonic_ns;
 pub use consumer::{Consumer, StatsClient, wait_for_samples};
 pub use error::{CapacityLimit, ClientError};

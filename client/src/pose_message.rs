@@ -15,7 +15,8 @@ pub struct WireObjectPose {
     /// Class id in the daemon's object set (1-based).
     pub class_id: u16,
     /// Index of the instance among this frame's instances (0-based, largest
-    /// mask first); not stable from frame to frame. See `docs/PROTOCOL.md`, "Poses".
+    /// mask first); in tracking mode an id that stays with its object while
+    /// it is in view. See `docs/PROTOCOL.md`, "Poses".
     pub instance_id: u16,
     /// ICP iterations, or refiner iterations of the network.
     pub refine_iterations: u16,

@@ -55,6 +55,13 @@ pub mod limits {
     pub const STATS_RESPONSE_BUFFER: usize = 2;
     /// Frames a producer may have loaned and not sent.
     pub const PUBLISHER_LOANS: usize = 2;
+    /// Cell poses (`fusepose/cell/poses`): one publisher (the daemon that serves the cell), subscribers, buffer.
+    pub const CELL_PUBLISHERS: usize = 1;
+    pub const CELL_SUBSCRIBERS: usize = 16;
+    pub const CELL_BUFFER: usize = 4;
+    pub const CELL_BORROWED: usize = 2;
+    /// The last cell message is replayed to a new subscriber.
+    pub const CELL_HISTORY: usize = 1;
 }
 use limits::*;
 /// Attribute every fusepose service carries; opening checks it.
@@ -92,13 +99,13 @@ pub fn camera_id(name: &str) -> u32 {
     name.bytes().fold(0x811c_9dc5u32, |h, b| (h ^ b as u32).wrapping_mul(0x0100_0193))
 }
 
-fn version_verifier() -> AttributeVerifier {
+pub(crate) fn version_verifier() -> AttributeVerifier {
     let key = AttributeKey::new(VERSION_ATTRIBUTE.as_bytes()).expect("constant attribute key is valid");
     let value = AttributeValue::new(WIRE_VERSION.to_string().as_bytes()).expect("version string is a valid value");
     AttributeVerifier::new().require(&key, &value).expect("one attribute fits")
 }
 
-fn service_name(name: &str) -> Result<ServiceName, ClientError> {
+pub(crate) fn service_name(name: &str) -> Result<ServiceName, ClientError> {
     ServiceName::new(name).map_err(|e| ClientError::ServiceOpen { service: name.to_owned(), detail: format!("{e:?}") })
 }
 
@@ -111,7 +118,7 @@ fn open_error(service: &str, detail: String, version_mismatch: bool) -> ClientEr
     }
 }
 
-fn pubsub_error(service: &str, e: PublishSubscribeOpenOrCreateError) -> ClientError {
+pub(crate) fn pubsub_error(service: &str, e: PublishSubscribeOpenOrCreateError) -> ClientError {
     // Types are checked before attributes: a fusepose type name with another
     // layout is another wire version too (e.g. a v2 pose message, 2656 bytes).
     let mismatch = matches!(
@@ -139,7 +146,7 @@ fn request_response_error(service: &str, e: RequestResponseOpenOrCreateError) ->
     open_error(service, format!("{e:?}"), mismatch)
 }
 
-fn open_event(ipc: &Ipc, name: &str, verifier: &AttributeVerifier) -> Result<EventService, ClientError> {
+pub(crate) fn open_event(ipc: &Ipc, name: &str, verifier: &AttributeVerifier) -> Result<EventService, ClientError> {
     ipc.node()
         .service_builder(&service_name(name)?)
         .event()

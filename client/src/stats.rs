@@ -89,7 +89,8 @@ pub struct StatsSnapshot {
     pub window_ns: u64,
     /// Deadline from capture to publish, ns.
     pub deadline_ns: u64,
-    /// Frames taken from shared memory (including ones dropped as stale).
+    /// Frames taken from shared memory and handled: processed, refused, or
+    /// dropped as stale (a frame waiting for its turn counts once handled).
     pub frames_received: u64,
     /// Frames run through the estimator and published as poses.
     pub frames_processed: u64,

@@ -59,6 +59,14 @@ fn layouts() -> Vec<Layout> {
             frames_processed, frames_skipped_stale, frames_missed_sequence, frames_invalid, invalid_by_reason,
             deadline_misses, estimator_failures, poses_non_finite, producer_restarts, since_start, last_window,
             poses_failed_verification, objects_shed, frames_degraded),
+        layout!(CellView in "cell_message.rs" as "fp_cell_view":
+            camera_id, instance_id, flags, confidence, offset_m, frame_sequence, capture_time_ns),
+        layout!(CellObject in "cell_message.rs" as "fp_cell_object":
+            class_id, view_count, flags, reserved, confidence, spread_m, quaternion, translation_m,
+            newest_capture_time_ns, oldest_capture_time_ns, views),
+        layout!(CellPoseMessage in "cell_message.rs" as "fp_cell_pose_message":
+            format_version, object_count, camera_count, truncated, trigger_camera_id, reserved, sequence,
+            published_time_ns, objects),
     ]
 }
 
@@ -86,6 +94,10 @@ fn constants() -> Vec<(&'static str, u64)> {
         ("FUSEPOSE_STATUS_ESTIMATOR_FAILED", PoseStatus::ESTIMATOR_FAILED as u64),
         ("FUSEPOSE_POSE_VERIFIED", PoseFlags::VERIFIED as u64),
         ("FUSEPOSE_POSE_FROM_INSTANCE_LABELS", PoseFlags::FROM_INSTANCE_LABELS as u64),
+        ("FUSEPOSE_MAX_CELL_OBJECTS", MAX_CELL_OBJECTS as u64),
+        ("FUSEPOSE_MAX_CELL_VIEWS", MAX_CELL_VIEWS as u64),
+        ("FUSEPOSE_CELL_VERIFIED", CellFlags::VERIFIED as u64),
+        ("FUSEPOSE_CELL_ROTATION_FROM_BEST_VIEW", CellFlags::ROTATION_FROM_BEST_VIEW as u64),
         ("FUSEPOSE_STAGE_INGEST", Stage::Ingest as u64),
         ("FUSEPOSE_STAGE_SEGMENTATION", Stage::Segmentation as u64),
         ("FUSEPOSE_STAGE_SAMPLING", Stage::Sampling as u64),

@@ -13,12 +13,15 @@ use iceoryx2::port::publisher::Publisher;
 use iceoryx2::port::server::Server;
 use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
+use iceoryx2::sample::Sample;
 
 use crate::counters::{FrameCounters, SequenceEvent, SequenceTracker};
 use crate::engine::{EngineFailure, PoseEngine, StageTimes};
 use crate::frame_view::to_frame_view;
 use crate::latency::{END_TO_END, LatencyBook};
 use crate::rate_limited_log::{RateLimit, RateLimitByKind};
+use crate::schedule::CameraClock;
+use crate::stable_ids::StableIds;
 
 const LOG_INTERVAL_NS: u64 = 1_000_000_000;
 
@@ -26,6 +29,11 @@ const LOG_INTERVAL_NS: u64 = 1_000_000_000;
 /// read the same CLOCK_MONOTONIC, so any real frame is behind; more than this
 /// means the producer stamps with another clock (e.g. wall time).
 pub const MAX_CAPTURE_AHEAD_NS: u64 = 1_000_000;
+/// Kept free after the estimate for publishing, with 1 ms for scheduling
+/// jitter (replays of the tuning split ran up to 0.5 ms late with 0.3 ms;
+/// docs/BENCHMARKS.md, "Instance budget").
+const PUBLISH_MARGIN_NS: u64 = 1_300_000;
+
 /// Oldest capture time still processed: a pose of an older frame is no use to
 /// a controller (the daemon was stalled, or the producer stamps 0 / another clock).
 pub const MAX_CAPTURE_AGE_NS: u64 = 2_000_000_000;
@@ -53,6 +61,12 @@ impl CameraPorts {
     }
 }
 
+/// A camera's newest received frame, waiting for its turn on the loop.
+struct Pending {
+    sample: Sample<ipc::Service, [u8], FrameHeader>,
+    sequence: SequenceEvent,
+}
+
 /// Everything the daemon knows about one camera, besides its ports.
 pub struct CameraState {
     pub name: String,
@@ -69,6 +83,15 @@ pub struct CameraState {
     estimator_log: RateLimit,
     /// Largest label id producers may send (the object set's classes; 0 = any).
     label_classes: u16,
+    pending: Option<Pending>,
+    /// Frame period and activity, for the scheduler.
+    pub clock: CameraClock,
+    /// The last pose message published (the cell output reads it).
+    pub last_message: PoseMessage,
+    /// Loop time spent on this camera's frames since start, ns.
+    pub busy_ns: u64,
+    /// Tracking mode: instance ids that stay with their object from frame to frame.
+    stable_ids: Option<StableIds>,
 }
 
 /// A pose on the wire, with its verification when the daemon verifies
@@ -142,18 +165,74 @@ impl CameraState {
             transport_log: RateLimit::new(LOG_INTERVAL_NS),
             estimator_log: RateLimit::new(LOG_INTERVAL_NS),
             label_classes,
+            pending: None,
+            clock: CameraClock::default(),
+            last_message: PoseMessage::default(),
+            busy_ns: 0,
+            stable_ids: None,
         }
+    }
+
+    /// Publishes instance ids that stay with their object (tracking mode); `None`: per-frame indices.
+    pub fn set_stable_ids(&mut self, ids: Option<StableIds>) {
+        self.stable_ids = ids;
+    }
+
+    /// Capture → publish budget of this camera's frames, ns.
+    pub fn deadline_ns(&self) -> u64 {
+        self.deadline_ns
+    }
+
+    /// Changes the budget (configuration reload).
+    pub fn set_deadline_ns(&mut self, deadline_ns: u64) {
+        self.deadline_ns = deadline_ns;
+    }
+
+    /// Replaces the estimator side (configuration reload); counters and histograms stay.
+    pub fn replace_engine(&mut self, engine: PoseEngine) {
+        self.label_classes = engine.label_classes();
+        self.engine = engine;
+    }
+
+    /// The least time a frame of this camera takes, ns, from its last posed
+    /// frame: ingest, segmentation, sampling, one object of the network, and
+    /// the publish margin (0 before the first posed frame).
+    pub fn min_frame_cost_ns(&self) -> u64 {
+        let m = &self.last_message;
+        if m.status & PoseStatus::OK == 0 {
+            return 0;
+        }
+        let t = |s: Stage| m.stage_ns[s as usize];
+        let objects = (m.object_count as u64).max(1);
+        t(Stage::Ingest) + t(Stage::Segmentation) + t(Stage::Sampling) + t(Stage::Network) / objects + PUBLISH_MARGIN_NS
+    }
+
+    /// The deadline of this camera's next frame: the pending one's, else the
+    /// one expected next (capture learned from its period), ns.
+    pub fn next_deadline_ns(&self) -> Option<u64> {
+        self.pending_deadline_ns().or_else(|| Some(self.clock.next_capture_ns()?.saturating_add(self.deadline_ns)))
+    }
+
+    /// Deadline of the frame waiting for its turn (capture + budget), ns.
+    pub fn pending_deadline_ns(&self) -> Option<u64> {
+        self.pending.as_ref().map(|p| p.sample.user_header().capture_time_ns.saturating_add(self.deadline_ns))
     }
 
     /// Drains the frame subscriber keeping only the newest frame, processes it
     /// and publishes its pose message. Returns whether a frame was processed.
     pub fn process_newest(&mut self, ports: &CameraPorts) -> bool {
-        let mut newest = None;
-        let mut newest_sequence = SequenceEvent::InOrder;
+        self.drain(ports);
+        self.process_pending(ports, None)
+    }
+
+    /// Takes every waiting frame from the subscriber and keeps the newest
+    /// (with the one already pending) for [`CameraState::process_pending`];
+    /// older ones count as skipped stale. Returns whether a frame is pending.
+    pub fn drain(&mut self, ports: &CameraPorts) -> bool {
+        let mut newest = self.pending.take().map(|p| (p.sample, p.sequence));
         loop {
             match ports.frames.receive() {
                 Ok(Some(sample)) => {
-                    self.counters.received += 1;
                     let header = sample.user_header();
                     let mut event = SequenceEvent::InOrder;
                     if header.magic == FRAME_MAGIC {
@@ -166,11 +245,15 @@ impl CameraState {
                                 tracing::info!(camera = %self.name, sequence = header.sequence, "frames from a new publisher (producer restarted)");
                             }
                         }
+                        self.clock.observe(header.capture_time_ns, monotonic_ns());
                     }
-                    if newest.replace(sample).is_some() {
+                    // A frame counts as received once handled: processed, or
+                    // replaced here by a newer one (stale), so that received =
+                    // processed + stale + refused holds at every stats query.
+                    if newest.replace((sample, event)).is_some() {
+                        self.counters.received += 1;
                         self.counters.skipped_stale += 1;
                     }
-                    newest_sequence = event;
                 }
                 Ok(None) => break,
                 Err(e) => {
@@ -181,7 +264,16 @@ impl CameraState {
                 }
             }
         }
-        let Some(sample) = newest else { return false };
+        self.pending = newest.map(|(sample, sequence)| Pending { sample, sequence });
+        self.pending.is_some()
+    }
+
+    /// Processes the pending frame, if any, and publishes its pose message;
+    /// with `slice_end_ns` the estimator also fits the frame into the time
+    /// before it (the camera's share of the loop). Returns whether a frame was processed.
+    pub fn process_pending(&mut self, ports: &CameraPorts, slice_end_ns: Option<u64>) -> bool {
+        let Some(Pending { sample, sequence: newest_sequence }) = self.pending.take() else { return false };
+        self.counters.received += 1;
         let received_ns = monotonic_ns();
         let header = *sample.user_header();
         let mut times: StageTimes = [0; STAGE_COUNT];
@@ -206,12 +298,13 @@ impl CameraState {
                 times[Stage::Ingest as usize] = monotonic_ns() - received_ns;
                 match checked {
                     Err((reason, detail)) => self.reject(&mut msg, reason, &detail),
-                    Ok(()) => valid = self.estimate(&view, &header, &mut msg, &mut times),
+                    Ok(()) => valid = self.estimate(&view, &header, slice_end_ns, &mut msg, &mut times),
                 }
             }
         }
         drop(sample); // give the frame back before publishing
         self.publish(ports, msg, times, valid);
+        self.busy_ns += monotonic_ns().saturating_sub(received_ns);
         true
     }
 
@@ -236,17 +329,15 @@ impl CameraState {
         &mut self,
         view: &fusepose_estimator::FrameView<'_>,
         header: &FrameHeader,
+        slice_end_ns: Option<u64>,
         msg: &mut PoseMessage,
         times: &mut StageTimes,
     ) -> bool {
         // The estimator fits its work into what is left of the deadline, minus
-        // the verification measured on recent frames and the publish step with
-        // 1 ms for scheduling jitter (replays of the tuning split ran up to
-        // 0.5 ms late with 0.3 ms; docs/BENCHMARKS.md, "Instance budget").
-        const PUBLISH_MARGIN_NS: u64 = 1_300_000;
+        // the verification measured on recent frames and the publish margin.
         let reserve_ns = PUBLISH_MARGIN_NS + self.engine.post_estimate_reserve_ns();
-        let left_ns =
-            header.capture_time_ns.saturating_add(self.deadline_ns).saturating_sub(monotonic_ns() + reserve_ns);
+        let end_ns = header.capture_time_ns.saturating_add(self.deadline_ns).min(slice_end_ns.unwrap_or(u64::MAX));
+        let left_ns = end_ns.saturating_sub(monotonic_ns() + reserve_ns);
         self.engine.set_deadline(Some(std::time::Instant::now() + std::time::Duration::from_nanos(left_ns)));
         // A panic inside the estimator on odd input must not take the daemon down.
         let engine = &mut self.engine;
@@ -267,6 +358,9 @@ impl CameraState {
                     finite += 1;
                 }
                 let non_finite = poses.iter().filter(|p| !pose_is_finite(p)).count();
+                if let Some(ids) = self.stable_ids.as_mut() {
+                    ids.assign(&mut msg.objects[..finite]);
+                }
                 msg.object_count = finite as u16;
                 msg.status = PoseStatus::OK;
                 if self.engine.degraded() {
@@ -350,6 +444,7 @@ impl CameraState {
         }
         times[Stage::Publish as usize] = monotonic_ns() - start;
         msg.stage_ns = times;
+        self.last_message = msg;
         let sent = ports
             .poses
             .loan_uninit()

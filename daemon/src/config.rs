@@ -33,12 +33,19 @@ pub enum MaskSource {
     Net,
 }
 
+/// Most cameras one daemon serves.
+pub const MAX_CAMERAS: usize = 16;
+
 /// The whole configuration file.
 #[derive(Clone, Debug, PartialEq, Deserialize)]
 #[serde(deny_unknown_fields, default)]
 pub struct DaemonConfig {
-    /// Camera names served; each gets the services `fusepose/camera/<name>/…`.
+    /// Camera names served with the daemon-wide settings; each gets the
+    /// services `fusepose/camera/<name>/…`. Unset when `[[camera]]` tables
+    /// are given: then those are the cameras.
     pub cameras: Vec<String>,
+    /// `[[camera]]` tables: cameras with their own settings (served besides `cameras`).
+    pub camera: Vec<CameraEntry>,
     /// `tracing` filter (`error`, `warn`, `info`, `debug`, `trace`, or a directive list);
     /// the `FUSEPOSE_LOG` environment variable overrides it.
     pub log_level: String,
@@ -47,6 +54,97 @@ pub struct DaemonConfig {
     pub estimator: EstimatorConfig,
     pub stats: StatsConfig,
     pub ipc: IpcConfig,
+    pub cell: CellConfig,
+}
+
+/// `[[camera]]`: one camera and what it does differently from the daemon-wide settings.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CameraEntry {
+    pub name: String,
+    /// Capture → publish budget of this camera's frames, ms (default: `deadline_ms`).
+    pub deadline_ms: Option<f64>,
+    /// Most instances estimated per frame (default: `estimator.max_instances`).
+    pub max_instances: Option<usize>,
+    /// Where instance masks come from (default: `estimator.masks`).
+    pub masks: Option<MaskSource>,
+    /// Network weights of this camera (default: `estimator.weights`).
+    pub weights: Option<PathBuf>,
+    /// Object set of this camera (default: `estimator.objects`); its objects
+    /// join the cell output by name.
+    pub objects: Option<String>,
+    pub objects_scale: Option<f64>,
+    /// Where the camera is in the cell (default: the cell frame itself).
+    #[serde(default)]
+    pub extrinsics: Extrinsics,
+}
+
+/// Camera → cell transform: a point `p` in the camera optical frame is
+/// `R(quaternion_xyzw) p + translation_m` in the cell frame (metres).
+#[derive(Clone, Copy, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct Extrinsics {
+    pub translation_m: [f64; 3],
+    /// Unit quaternion `[x, y, z, w]` (normalised when within 1e-3 of unit length).
+    pub quaternion_xyzw: [f64; 4],
+}
+
+impl Default for Extrinsics {
+    fn default() -> Self {
+        Self { translation_m: [0.0; 3], quaternion_xyzw: [0.0, 0.0, 0.0, 1.0] }
+    }
+}
+
+impl Extrinsics {
+    /// The camera → cell isometry.
+    pub fn isometry(&self) -> nalgebra::Isometry3<f64> {
+        let [x, y, z, w] = self.quaternion_xyzw;
+        let q = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(w, x, y, z));
+        let [tx, ty, tz] = self.translation_m;
+        nalgebra::Isometry3::from_parts(nalgebra::Translation3::new(tx, ty, tz), q)
+    }
+}
+
+/// `[cell]`: every camera's objects in one cell frame on `fusepose/cell/poses`.
+#[derive(Clone, Debug, PartialEq, Deserialize)]
+#[serde(deny_unknown_fields, default)]
+pub struct CellConfig {
+    /// Publish cell poses (one daemon per iceoryx2 namespace may).
+    pub enabled: bool,
+    /// A camera's latest poses join the cell while their capture is at most this old, ms.
+    pub max_age_ms: f64,
+    /// Two cameras' poses of one class are one object when their translations
+    /// lie within this distance, metres; 0 = half the object's diameter.
+    pub merge_distance_m: f64,
+    /// Which pose an object's entry carries: "best-fit" (the view with the
+    /// smallest verified depth residual) or "mean" (confidence-weighted mean).
+    pub fusion: String,
+    /// With `fusion = "mean"`: views whose rotation differs from the best
+    /// view's by more than this (degrees) do not enter the mean rotation.
+    pub max_rotation_deg: f64,
+}
+
+impl Default for CellConfig {
+    fn default() -> Self {
+        Self {
+            enabled: true,
+            max_age_ms: 150.0,
+            merge_distance_m: 0.0,
+            fusion: "best-fit".to_owned(),
+            max_rotation_deg: 20.0,
+        }
+    }
+}
+
+/// One served camera with every setting resolved.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CameraSettings {
+    pub name: String,
+    pub deadline_ns: u64,
+    pub max_instances: usize,
+    /// `[estimator]` with this camera's overrides applied (`max_instances` is the field above).
+    pub estimator: EstimatorConfig,
+    pub extrinsics: Extrinsics,
 }
 
 /// `[estimator]`
@@ -172,9 +270,11 @@ impl Default for DaemonConfig {
             cameras: vec!["cam0".to_owned()],
             log_level: "info".to_owned(),
             deadline_ms: 1000.0 / 24.0,
+            camera: Vec::new(),
             estimator: EstimatorConfig::default(),
             stats: StatsConfig::default(),
             ipc: IpcConfig::default(),
+            cell: CellConfig::default(),
         }
     }
 }
@@ -252,24 +352,124 @@ impl DaemonConfig {
 
     /// Parses and checks configuration text.
     pub fn parse(text: &str) -> Result<Self, ConfigError> {
-        let config: Self = toml::from_str(text)
-            .map_err(|e| ConfigError::Parse { path: PathBuf::from("<text>"), message: e.to_string() })?;
+        let parse_error =
+            |e: toml::de::Error| ConfigError::Parse { path: PathBuf::from("<text>"), message: e.to_string() };
+        let mut config: Self = toml::from_str(text).map_err(parse_error)?;
+        // `[[camera]]` tables without a `cameras` list: those tables are the cameras.
+        let table: toml::Table = toml::from_str(text).map_err(parse_error)?;
+        if !table.contains_key("cameras") && !config.camera.is_empty() {
+            config.cameras.clear();
+        }
         config.validate()?;
         Ok(config)
     }
 
+    /// Every served camera with its settings resolved: `cameras` first, then `[[camera]]` tables.
+    pub fn camera_settings(&self) -> Vec<CameraSettings> {
+        let plain = self.cameras.iter().map(|name| CameraSettings {
+            name: name.clone(),
+            deadline_ns: self.deadline_ns(),
+            max_instances: self.estimator.max_instances,
+            estimator: self.estimator.clone(),
+            extrinsics: Extrinsics::default(),
+        });
+        let own = self.camera.iter().map(|c| {
+            let mut estimator = self.estimator.clone();
+            if let Some(w) = &c.weights {
+                estimator.weights = w.clone();
+            }
+            if let Some(o) = &c.objects {
+                estimator.objects = o.clone();
+            }
+            if let Some(s) = c.objects_scale {
+                estimator.objects_scale = s;
+            }
+            if let Some(m) = c.masks {
+                estimator.masks = m;
+            }
+            CameraSettings {
+                name: c.name.clone(),
+                deadline_ns: (c.deadline_ms.unwrap_or(self.deadline_ms) * 1e6).round() as u64,
+                max_instances: c.max_instances.unwrap_or(self.estimator.max_instances),
+                estimator,
+                extrinsics: c.extrinsics,
+            }
+        });
+        plain.chain(own).collect()
+    }
+
+    /// Names of every served camera, in [`DaemonConfig::camera_settings`] order.
+    pub fn camera_names(&self) -> Vec<String> {
+        self.cameras.iter().cloned().chain(self.camera.iter().map(|c| c.name.clone())).collect()
+    }
+
     /// Checks value ranges; the error names the offending key.
     pub fn validate(&self) -> Result<(), ConfigError> {
-        if self.cameras.is_empty() {
-            return Err(invalid("cameras", &self.cameras, "list at least one camera"));
+        let names = self.camera_names();
+        if names.is_empty() {
+            return Err(invalid("cameras", &self.cameras, "list at least one camera (or give [[camera]] tables)"));
         }
-        for (i, name) in self.cameras.iter().enumerate() {
+        if names.len() > MAX_CAMERAS {
+            return Err(invalid("cameras", names.len(), "at most 16 cameras per daemon"));
+        }
+        for (i, name) in names.iter().enumerate() {
+            let key = if i < self.cameras.len() { "cameras" } else { "camera.name" };
             if fusepose_client::validate_camera_name(name).is_err() {
-                return Err(invalid("cameras", name, "names are 1 to 64 characters of [A-Za-z0-9_-]"));
+                return Err(invalid(key, name, "names are 1 to 64 characters of [A-Za-z0-9_-]"));
             }
-            if self.cameras[..i].contains(name) {
-                return Err(invalid("cameras", name, "each camera may appear once"));
+            if names[..i].contains(name) {
+                return Err(invalid(key, name, "each camera may appear once (in `cameras` or one [[camera]] table)"));
             }
+        }
+        for c in &self.camera {
+            if let Some(d) = c.deadline_ms
+                && !(d.is_finite() && d > 0.0)
+            {
+                return Err(invalid("camera.deadline_ms", (&c.name, d), "must be a positive number of milliseconds"));
+            }
+            if let Some(m) = c.max_instances
+                && (m == 0 || m > fusepose_client::MAX_OBJECTS)
+            {
+                return Err(invalid("camera.max_instances", (&c.name, m), "must be in 1..=32 (poses per message)"));
+            }
+            if let Some(s) = c.objects_scale
+                && !(s.is_finite() && s > 0.0)
+            {
+                return Err(invalid("camera.objects_scale", (&c.name, s), "must be positive"));
+            }
+            let x = &c.extrinsics;
+            if !x.translation_m.iter().all(|v| v.is_finite() && v.abs() < 1e3) {
+                return Err(invalid(
+                    "camera.extrinsics.translation_m",
+                    (&c.name, x.translation_m),
+                    "must be finite metres (under 1 km)",
+                ));
+            }
+            let norm = x.quaternion_xyzw.iter().map(|v| v * v).sum::<f64>().sqrt();
+            if !(norm.is_finite() && (norm - 1.0).abs() <= 1e-3) {
+                return Err(invalid(
+                    "camera.extrinsics.quaternion_xyzw",
+                    (&c.name, x.quaternion_xyzw),
+                    "must be a unit quaternion [x, y, z, w] (length 1 within 1e-3)",
+                ));
+            }
+        }
+        let cell = &self.cell;
+        if !(cell.max_age_ms.is_finite() && cell.max_age_ms > 0.0) {
+            return Err(invalid("cell.max_age_ms", cell.max_age_ms, "must be a positive number of milliseconds"));
+        }
+        if !(cell.merge_distance_m.is_finite() && (0.0..=1.0).contains(&cell.merge_distance_m)) {
+            return Err(invalid(
+                "cell.merge_distance_m",
+                cell.merge_distance_m,
+                "must be in 0..=1 metres (0 = half the object's diameter)",
+            ));
+        }
+        if cell.fusion.parse::<crate::cell::Fusion>().is_err() {
+            return Err(invalid("cell.fusion", &cell.fusion, "must be \"best-fit\" or \"mean\""));
+        }
+        if !(cell.max_rotation_deg.is_finite() && (0.0..=180.0).contains(&cell.max_rotation_deg)) {
+            return Err(invalid("cell.max_rotation_deg", cell.max_rotation_deg, "must be in 0..=180 degrees"));
         }
         if !(self.deadline_ms.is_finite() && self.deadline_ms > 0.0) {
             return Err(invalid("deadline_ms", self.deadline_ms, "must be a positive number of milliseconds"));
@@ -447,6 +647,54 @@ mod tests {
         assert!(err.starts_with("estimator.crop_size = 0"), "{err}");
         let err = DaemonConfig::parse("[estimator]\nworker_threads = 0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.worker_threads = 0"), "{err}");
+    }
+
+    #[test]
+    fn camera_tables_give_per_camera_settings() {
+        let text = r#"
+deadline_ms = 40.0
+[estimator]
+max_instances = 6
+[[camera]]
+name = "wrist"
+deadline_ms = 30.0
+max_instances = 3
+masks = "labels"
+[camera.extrinsics]
+translation_m = [0.1, 0.0, 0.5]
+quaternion_xyzw = [0.0, 0.0, 0.7071068, 0.7071068]
+[[camera]]
+name = "overhead"
+"#;
+        let c = DaemonConfig::parse(text).unwrap();
+        assert!(c.cameras.is_empty(), "tables without `cameras`: no implicit cam0");
+        let s = c.camera_settings();
+        assert_eq!(s.iter().map(|s| s.name.as_str()).collect::<Vec<_>>(), ["wrist", "overhead"]);
+        assert_eq!((s[0].deadline_ns, s[0].max_instances, s[0].estimator.masks), (30_000_000, 3, MaskSource::Labels));
+        assert_eq!((s[1].deadline_ns, s[1].max_instances, s[1].estimator.masks), (40_000_000, 6, MaskSource::Auto));
+        assert_eq!(s[1].estimator, c.estimator, "no overrides: the daemon-wide estimator");
+        let p = s[0].extrinsics.isometry() * nalgebra::Point3::new(1.0, 0.0, 0.0);
+        assert!((p - nalgebra::Point3::new(0.1, 1.0, 0.5)).norm() < 1e-6, "{p}");
+
+        let both = DaemonConfig::parse("cameras = [\"cam0\"]\n[[camera]]\nname = \"cam1\"\n").unwrap();
+        assert_eq!(both.camera_names(), ["cam0", "cam1"]);
+        let err = DaemonConfig::parse("cameras = [\"cam0\"]\n[[camera]]\nname = \"cam0\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("camera.name"), "{err}");
+        let err = DaemonConfig::parse(
+            "[[camera]]\nname = \"a\"\n[camera.extrinsics]\nquaternion_xyzw = [0.0, 0.0, 0.0, 2.0]\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(err.starts_with("camera.extrinsics.quaternion_xyzw"), "{err}");
+        let err = DaemonConfig::parse("[[camera]]\nname = \"a\"\nmax_instances = 0\n").unwrap_err().to_string();
+        assert!(err.starts_with("camera.max_instances"), "{err}");
+        let err = DaemonConfig::parse("[[camera]]\nname = \"a\"\ndeadline = 3\n").unwrap_err().to_string();
+        assert!(err.contains("deadline"), "unknown key named: {err}");
+        let err = DaemonConfig::parse("[cell]\nmax_age_ms = 0\n").unwrap_err().to_string();
+        assert!(err.starts_with("cell.max_age_ms"), "{err}");
+        let err = DaemonConfig::parse("[cell]\nfusion = \"median\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("cell.fusion"), "{err}");
+        assert_eq!(DaemonConfig::parse("[cell]\nfusion = \"mean\"\n").unwrap().cell.fusion, "mean");
     }
 
     #[test]

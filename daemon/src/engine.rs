@@ -3,7 +3,7 @@
 //! label plane are segmented by the built-in segmenter when the weight file
 //! has one (`estimator.masks`).
 
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 
 use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions};
@@ -44,6 +44,9 @@ pub struct EngineSpec {
     pub seg_boundary: Boundary,
     /// The network's and segmenter's cost measured at start (network only).
     pub startup_cost: Option<crate::startup_cost::StartupCost>,
+    /// The segmenter engine every camera of this spec uses (made by the first
+    /// [`PoseEngine::new`]): one copy of its weights and buffers; cameras take turns.
+    pub shared_segmenter: std::sync::OnceLock<Arc<Mutex<SegEngine>>>,
 }
 
 /// The object set named by `estimator.objects`.
@@ -153,6 +156,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             part_extents: Vec::new(),
             seg_boundary: Boundary::default(),
             startup_cost: None,
+            shared_segmenter: Default::default(),
         })
     };
     match config.kind {
@@ -168,6 +172,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             part_extents: Vec::new(),
             seg_boundary: Boundary::default(),
             startup_cost: None,
+            shared_segmenter: Default::default(),
         }),
         EstimatorKind::Icp => icp(),
         EstimatorKind::Net => {
@@ -234,17 +239,9 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         objects.len(),
         config.refine_iterations
     );
-    // The probe serves the first camera; further cameras load their own copy.
-    let first = std::sync::Mutex::new(Some(probe));
-    let (path, later_options) = (config.weights.clone(), net_options(config));
-    let factory: EstimatorFactory = Box::new(move || {
-        if let Some(net) = first.lock().ok().and_then(|mut f| f.take()) {
-            return Ok(Box::new(net) as Box<dyn Estimator>);
-        }
-        let net = NetEstimator::load(&path, &objects, later_options)
-            .map_err(|e| anyhow::anyhow!("estimator.weights: {e}"))?;
-        Ok(Box::new(net) as Box<dyn Estimator>)
-    });
+    // Every camera gets a sibling of the probe: one copy of the weights and
+    // one worker thread for all cameras (they take turns), own buffers and state.
+    let factory: EstimatorFactory = Box::new(move || Ok(Box::new(probe.sibling()) as Box<dyn Estimator>));
     Ok(EngineSpec {
         description,
         factory: Some(factory),
@@ -257,6 +254,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         part_extents: Vec::new(),
         seg_boundary: Boundary::default(),
         startup_cost,
+        shared_segmenter: Default::default(),
     })
 }
 
@@ -282,7 +280,7 @@ pub struct PoseEngine {
     workspace: Option<Workspace>,
     poses: PoseSet,
     estimate_stage: Stage,
-    segmenter: Option<SegEngine>,
+    segmenter: Option<Arc<Mutex<SegEngine>>>,
     masks: MaskSource,
     /// The segmenter's label plane for the current frame.
     labels: Vec<u16>,
@@ -339,27 +337,37 @@ pub type StageTimes = [u64; STAGE_COUNT];
 
 impl PoseEngine {
     pub fn new(spec: &EngineSpec) -> anyhow::Result<Self> {
+        Self::with_max_instances(spec, spec.workspace.max_instances)
+    }
+
+    /// As [`PoseEngine::new`], estimating at most `max_instances` per frame
+    /// (a camera's own `max_instances`).
+    pub fn with_max_instances(spec: &EngineSpec, max_instances: usize) -> anyhow::Result<Self> {
         let estimator = spec.factory.as_ref().map(|f| f()).transpose()?;
+        let workspace_config = WorkspaceConfig { max_instances, ..spec.workspace };
         let workspace = match estimator {
             Some(_) => {
-                let mut ws = Workspace::new(spec.workspace).map_err(|e| anyhow::anyhow!("estimator: {e}"))?;
+                let mut ws = Workspace::new(workspace_config).map_err(|e| anyhow::anyhow!("estimator: {e}"))?;
                 ws.join_parts(&spec.part_extents);
                 Some(ws)
             }
             None => None,
         };
         let segmenter = match (&estimator, &spec.segmenter) {
-            (Some(_), Some(file)) => {
-                let mut seg = SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?;
-                seg.set_boundary(spec.seg_boundary);
-                Some(seg)
-            }
+            (Some(_), Some(file)) => Some(match spec.shared_segmenter.get() {
+                Some(shared) => shared.clone(),
+                None => {
+                    let mut seg = SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?;
+                    seg.set_boundary(spec.seg_boundary);
+                    spec.shared_segmenter.get_or_init(|| Arc::new(Mutex::new(seg))).clone()
+                }
+            }),
             _ => None,
         };
         Ok(Self {
             estimator,
             workspace,
-            poses: PoseSet::with_capacity(spec.workspace.max_instances),
+            poses: PoseSet::with_capacity(max_instances),
             estimate_stage: spec.estimate_stage,
             segmenter,
             masks: spec.masks,
@@ -368,7 +376,7 @@ impl PoseEngine {
             min_confidence: spec.min_confidence,
             verifier: spec.verify.as_ref().map(|(objects, cfg, _)| Verifier::new(objects, *cfg)),
             verify_drop: spec.verify.as_ref().is_some_and(|v| v.2),
-            verdicts: Vec::with_capacity(spec.workspace.max_instances),
+            verdicts: Vec::with_capacity(max_instances),
             rejected: 0,
             failed_verification: 0,
             post_estimate_ns: 0.0,
@@ -414,6 +422,8 @@ impl PoseEngine {
             Some(seg) if self.masks == MaskSource::Net || frame.labels.is_none() => {
                 let ts = fusepose_client::monotonic_ns();
                 frame.validate()?;
+                // Shared by the cameras of this spec; the loop runs one frame at a time.
+                let mut seg = seg.lock().unwrap_or_else(|e| e.into_inner());
                 // With the centre-offset head the segmenter separates touching
                 // copies of a class: an instance plane (its class table copied
                 // into a buffer of fixed capacity), else a class plane.

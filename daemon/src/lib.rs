@@ -5,10 +5,15 @@
 //! the client (IPC) and the estimator; never the trainer.
 //!
 //! The loop is single-threaded: iceoryx2 `ipc` ports are not `Send`, and a
-//! frame is processed while its shared-memory sample is borrowed.
+//! frame is processed while its shared-memory sample is borrowed. One daemon
+//! serves several cameras: their frames take turns, earliest deadline first,
+//! on one copy of the weights, and their poses meet in one cell frame.
 
 pub mod camera;
 pub mod camera_lock;
+pub mod camera_set;
+pub mod cell;
+pub mod cell_output;
 pub mod config;
 pub mod counters;
 pub mod engine;
@@ -18,7 +23,10 @@ pub mod interval_log;
 pub mod ipc_root;
 pub mod latency;
 pub mod rate_limited_log;
+pub mod reload;
+pub mod schedule;
+pub mod stable_ids;
 pub mod startup_cost;
 
 pub use config::{DaemonConfig, EstimatorKind};
-pub use event_loop::{RunReport, run};
+pub use event_loop::{RunOptions, RunReport, run, run_with};

@@ -11,7 +11,8 @@ use fusepose_daemon::{DaemonConfig, engine};
 #[command(name = "fuseposed", version, about)]
 struct Args {
     /// Configuration file (TOML), e.g. config/fuseposed.toml, which documents
-    /// every key. Without it every key takes its default.
+    /// every key. Without it every key takes its default. SIGHUP re-reads it
+    /// (cameras added, removed or changed; the others keep running).
     #[arg(long)]
     config: Option<PathBuf>,
     /// Check the configuration, print the measured budget (network configurations) and exit.
@@ -53,13 +54,14 @@ fn main() -> ExitCode {
         }
     };
     if args.check {
-        println!("configuration ok: cameras {:?}, estimator {}", config.cameras, spec.description);
+        println!("configuration ok: cameras {:?}, estimator {}", config.camera_names(), spec.description);
         if let Some(cost) = &spec.startup_cost {
             println!("budget: {}", cost.describe(config.deadline_ms));
         }
         return ExitCode::SUCCESS;
     }
-    match fusepose_daemon::run(&config, &spec, None) {
+    let options = fusepose_daemon::RunOptions { stop: None, config_path: args.config.clone() };
+    match fusepose_daemon::run_with(&config, &spec, options) {
         Ok(_) => ExitCode::SUCCESS,
         Err(e) => {
             tracing::error!("fuseposed failed: {e:#}");

@@ -287,12 +287,53 @@ impl PoseLine {
     }
 }
 
+/// One line printed by `fp-test-consumer @cell` per cell message.
+#[derive(Clone, Debug, PartialEq)]
+pub struct CellLine {
+    pub sequence: u64,
+    pub cameras: u16,
+    pub objects: u16,
+    pub trigger: u32,
+    pub published_ns: u64,
+}
+
+impl CellLine {
+    /// Parses `cell seq=.. cameras=.. objects=.. trigger=.. published=..`.
+    pub fn parse(line: &str) -> Option<Self> {
+        let rest = line.strip_prefix("cell ")?;
+        let mut fields = std::collections::HashMap::new();
+        for kv in rest.split_whitespace() {
+            let (k, v) = kv.split_once('=')?;
+            fields.insert(k, v.parse::<u64>().ok()?);
+        }
+        Some(Self {
+            sequence: *fields.get("seq")?,
+            cameras: *fields.get("cameras")? as u16,
+            objects: *fields.get("objects")? as u16,
+            trigger: *fields.get("trigger")? as u32,
+            published_ns: *fields.get("published")?,
+        })
+    }
+
+    pub fn format(msg: &fusepose_client::CellPoseMessage) -> String {
+        format!(
+            "cell seq={} cameras={} objects={} trigger={} published={}",
+            msg.sequence, msg.camera_count, msg.object_count, msg.trigger_camera_id, msg.published_time_ns
+        )
+    }
+}
+
 /// Starts `fuseposed --config <config>` in `env`'s namespace and waits until it answers stats.
 pub fn start_daemon(env: &TestEnv, config: &Path) -> anyhow::Result<Proc> {
+    start_daemon_for(env, config, "cam0")
+}
+
+/// As [`start_daemon`], waiting for the stats of `camera` (one it serves).
+pub fn start_daemon_for(env: &TestEnv, config: &Path, camera: &str) -> anyhow::Result<Proc> {
     let mut cmd = Command::new(daemon_binary()?);
     cmd.arg("--config").arg(config).current_dir(env.dir.path());
     let daemon = Proc::spawn("fuseposed", cmd)?;
-    query_stats(env, Duration::from_secs(20)).context("fuseposed never answered a stats request")?;
+    query_stats_of(env, camera, Duration::from_secs(20)).context("fuseposed never answered a stats request")?;
     Ok(daemon)
 }
 
@@ -348,8 +389,17 @@ pub fn memory_sample(pid: i32, t_s: f64) -> anyhow::Result<MemorySample> {
 
 /// Asks the daemon for camera `cam0`'s stats, retrying until `timeout`.
 pub fn query_stats(env: &TestEnv, timeout: Duration) -> anyhow::Result<fusepose_client::StatsSnapshot> {
+    query_stats_of(env, "cam0", timeout)
+}
+
+/// Asks the daemon for `camera`'s stats, retrying until `timeout`.
+pub fn query_stats_of(
+    env: &TestEnv,
+    camera: &str,
+    timeout: Duration,
+) -> anyhow::Result<fusepose_client::StatsSnapshot> {
     let ipc = fusepose_client::Ipc::new(&env.ipc_options())?;
-    let client = fusepose_client::StatsClient::open(&ipc, "cam0")?;
+    let client = fusepose_client::StatsClient::open(&ipc, camera)?;
     let deadline = Instant::now() + timeout;
     loop {
         match client.query(Duration::from_millis(500)) {
@@ -363,9 +413,21 @@ pub fn query_stats(env: &TestEnv, timeout: Duration) -> anyhow::Result<fusepose_
 /// Starts the test producer: `frames` frames (0 = forever) at `fps` from sequence `start`,
 /// breaking the frames whose sequence is in `malformed`.
 pub fn start_producer(env: &TestEnv, frames: u64, fps: f64, start: u64, malformed: &[u64]) -> anyhow::Result<Proc> {
+    start_producer_of(env, "cam0", frames, fps, start, malformed)
+}
+
+/// As [`start_producer`], for `camera`.
+pub fn start_producer_of(
+    env: &TestEnv,
+    camera: &str,
+    frames: u64,
+    fps: f64,
+    start: u64,
+    malformed: &[u64],
+) -> anyhow::Result<Proc> {
     let mut cmd = Command::new(package_binary("fp-test-producer")?);
     env.apply(&mut cmd);
-    cmd.args(["cam0", &frames.to_string(), &fps.to_string(), &start.to_string()]);
+    cmd.args([camera, &frames.to_string(), &fps.to_string(), &start.to_string()]);
     cmd.args(malformed.iter().map(u64::to_string));
     let p = Proc::spawn("fp-test-producer", cmd)?;
     p.wait_for_line("ready", Duration::from_secs(10))?;
@@ -374,9 +436,15 @@ pub fn start_producer(env: &TestEnv, frames: u64, fps: f64, start: u64, malforme
 
 /// Starts a test consumer that prints pose lines for up to `duration`.
 pub fn start_consumer(env: &TestEnv, duration: Duration) -> anyhow::Result<Proc> {
+    start_consumer_of(env, "cam0", duration)
+}
+
+/// As [`start_consumer`], for `camera`; `@cell` consumes the cell poses
+/// (one `cell …` line per message, see [`CellLine`]).
+pub fn start_consumer_of(env: &TestEnv, camera: &str, duration: Duration) -> anyhow::Result<Proc> {
     let mut cmd = Command::new(package_binary("fp-test-consumer")?);
     env.apply(&mut cmd);
-    cmd.args(["cam0", &duration.as_millis().to_string()]);
+    cmd.args([camera, &duration.as_millis().to_string()]);
     let p = Proc::spawn("fp-test-consumer", cmd)?;
     p.wait_for_line("ready", Duration::from_secs(10))?;
     Ok(p)

@@ -7,6 +7,10 @@
 //! Capture time is taken when the producer loans the frame, so the copy into
 //! shared memory, the transport, the daemon, the pose message and the
 //! consumer's wake-up all count. The first second of frames is warm-up.
+//!
+//! `--cameras N`: one daemon serving cameras cam0…cam(N−1), a producer and a
+//! consumer per camera (each its own scene), and one consumer subscribed to
+//! every camera and the cell; one row per camera, and the daemon's RSS.
 
 pub mod processes;
 
@@ -30,6 +34,9 @@ pub struct E2eArgs {
     /// Objects per frame.
     #[arg(long, alias = "objects", default_value_t = 5)]
     pub objects_per_frame: usize,
+    /// Cameras served by the one daemon, each with its own producer and consumer (1..=8).
+    #[arg(long, default_value_t = 1)]
+    pub cameras: usize,
     /// Measured seconds per frame rate (after 1 s of warm-up).
     #[arg(long, default_value_t = 20.0)]
     pub seconds: f64,
@@ -80,6 +87,7 @@ impl Default for E2eArgs {
         Self {
             fps: vec![24.0, 30.0, 60.0],
             objects_per_frame: 5,
+            cameras: 1,
             seconds: 20.0,
             deadline_ms: None,
             weights: "models/builtin.safetensors".into(),
@@ -101,6 +109,8 @@ impl Default for E2eArgs {
 /// One frame rate's result.
 #[derive(Clone, Debug)]
 pub struct RateResult {
+    /// The camera of this row.
+    pub camera: String,
     pub fps: f64,
     pub deadline_ms: f64,
     pub sent: u64,
@@ -112,6 +122,11 @@ pub struct RateResult {
     /// The daemon's own count of frames it dropped as stale (a newer one was waiting).
     pub daemon_stale: Option<u64>,
     pub estimator: String,
+    /// The daemon's resident memory at the end of the run, KiB: whole, private,
+    /// shared memory (same for every camera row).
+    pub daemon_rss_kib: Option<[u64; 3]>,
+    /// `--cameras N > 1`: what the consumer of all cameras counted (same for every row).
+    pub all: Option<processes::AllCounts>,
 }
 
 impl RateResult {
@@ -143,7 +158,8 @@ pub struct E2eReport {
 pub fn daemon_config(args: &E2eArgs, ns: &IpcNamespace, deadline_ms: f64, hlog: &std::path::Path) -> String {
     let pins = if args.pin { "[0, 1]" } else { "[]" };
     format!(
-        "cameras = [\"{CAMERA}\"]\nlog_level = \"info\"\ndeadline_ms = {deadline_ms}\n\n[estimator]\nkind = \"net\"\nweights = {:?}\nmax_instances = 8\nrefine_iterations = {}\n{}deadline_aware = {}\npin_cpus = {pins}\n{}\n\n[estimator.tracking]\nenabled = {}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 0.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\nreceive_spin_us = {}\n",
+        "cameras = {:?}\nlog_level = \"info\"\ndeadline_ms = {deadline_ms}\n\n[estimator]\nkind = \"net\"\nweights = {:?}\nmax_instances = 8\nrefine_iterations = {}\n{}deadline_aware = {}\npin_cpus = {pins}\n{}\n\n[estimator.tracking]\nenabled = {}\n\n[stats]\nwindow_s = 1.0\nsummary_interval_s = 0.0\nhlog_path = {:?}\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\nreceive_spin_us = {}\n",
+        camera_names(args.cameras),
         args.weights.display().to_string(),
         args.refine_iterations,
         args.threads.map_or(String::new(), |t| format!("worker_threads = {}\n", t.clamp(1, 2))),
@@ -155,6 +171,20 @@ pub fn daemon_config(args: &E2eArgs, ns: &IpcNamespace, deadline_ms: f64, hlog: 
         ns.prefix,
         args.receive_spin_us,
     )
+}
+
+/// The camera names of a run with `n` cameras (`cam0` first, as with one).
+pub fn camera_names(n: usize) -> Vec<String> {
+    (0..n.max(1)).map(|i| format!("cam{i}")).collect()
+}
+
+/// Resident memory of process `pid`, KiB: whole (`VmRSS`), private (`RssAnon`), shared memory (`RssShmem`).
+fn rss_kib(pid: u32) -> Option<[u64; 3]> {
+    let status = std::fs::read_to_string(format!("/proc/{pid}/status")).ok()?;
+    let field = |name: &str| -> Option<u64> {
+        status.lines().find_map(|l| l.strip_prefix(name))?.split_whitespace().next()?.parse().ok()
+    };
+    Some([field("VmRSS:")?, field("RssAnon:")?, field("RssShmem:")?])
 }
 
 /// Starts the daemon process of `config` (logging to `log`) in `ns` and
@@ -183,7 +213,8 @@ pub fn start_daemon(
     Ok((daemon, ipc, stats))
 }
 
-fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
+/// One frame rate: a row per camera.
+fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<Vec<RateResult>> {
     let seconds = if args.smoke { args.seconds.min(2.0) } else { args.seconds };
     let warmup = fps.ceil() as u64;
     let frames = warmup + (fps * seconds).round() as u64;
@@ -198,76 +229,129 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<RateResult> {
     let log = args.out.join(format!("e2e-{tag}.daemon.log"));
     let env = ns.env();
 
-    let (daemon, _ipc, stats) = start_daemon(&ns, &config_path, &log)?;
-    let file = ns.dir.join("latencies.txt");
-    let mut consumer = ChildProcess::spawn(
-        "consumer",
-        &["e2e-consumer".into(), frames.to_string(), warmup.to_string(), file.display().to_string()],
-        &env,
-        Duration::from_secs(30),
-    )?;
+    let (daemon, ipc, _stats) = start_daemon(&ns, &config_path, &log)?;
+    let names = camera_names(args.cameras);
+    let files: Vec<PathBuf> = names.iter().map(|n| ns.dir.join(format!("latencies-{n}.txt"))).collect();
+    let mut consumers = Vec::with_capacity(names.len());
+    for (name, file) in names.iter().zip(&files) {
+        consumers.push(ChildProcess::spawn(
+            "consumer",
+            &["e2e-consumer".into(), frames.to_string(), warmup.to_string(), file.display().to_string(), name.clone()],
+            &env,
+            Duration::from_secs(30),
+        )?);
+    }
+    let mut all = if names.len() > 1 {
+        let seconds = frames as f64 / fps + 3.0;
+        Some(ChildProcess::spawn(
+            "consumer-all",
+            &["e2e-consumer-all".into(), seconds.to_string(), names.join(",")],
+            &env,
+            Duration::from_secs(30),
+        )?)
+    } else {
+        None
+    };
     let video_frames = if args.smoke { 4 } else { args.video_frames };
-    let mut producer = ChildProcess::spawn(
-        "producer",
-        &[
-            "e2e-producer".into(),
-            fps.to_string(),
-            frames.to_string(),
-            args.objects_per_frame.to_string(),
-            args.seed.to_string(),
-            video_frames.to_string(),
-        ],
-        &env,
-        Duration::from_secs(600),
-    )?;
-    eprintln!("e2e {fps} fps: {frames} frames ({warmup} warm-up), deadline {deadline_ms:.1} ms ...");
+    // Producers render their videos first and start together: a producer
+    // still rendering must not load the machine while another one's frames count.
+    let go = ns.dir.join("go");
+    let mut producers = Vec::with_capacity(names.len());
+    for (i, name) in names.iter().enumerate() {
+        producers.push(ChildProcess::spawn(
+            "producer",
+            &[
+                "e2e-producer".into(),
+                fps.to_string(),
+                frames.to_string(),
+                args.objects_per_frame.to_string(),
+                (args.seed + i as u64).to_string(),
+                video_frames.to_string(),
+                name.clone(),
+                go.display().to_string(),
+            ],
+            &env,
+            Duration::from_secs(600),
+        )?);
+    }
+    std::fs::write(&go, b"")?;
+    eprintln!(
+        "e2e {fps} fps, {} camera(s): {frames} frames ({warmup} warm-up), deadline {deadline_ms:.1} ms ...",
+        names.len()
+    );
     let run_time = Duration::from_secs_f64(frames as f64 / fps + 60.0);
-    producer.expect_line("done", run_time)?;
-    let result = consumer.expect_line("result", Duration::from_secs(30))?;
-    let counts: ConsumerCounts = serde_json::from_str(&result)?;
-    let daemon_stale = stats.query(Duration::from_secs(1)).ok().map(|s| s.frames_skipped_stale);
+    for p in &mut producers {
+        p.expect_line("done", run_time)?;
+    }
+    let mut counts = Vec::with_capacity(names.len());
+    for c in &mut consumers {
+        counts.push(serde_json::from_str::<ConsumerCounts>(&c.expect_line("result", Duration::from_secs(30))?)?);
+    }
+    let all_counts = match all.as_mut() {
+        Some(a) => {
+            Some(serde_json::from_str::<processes::AllCounts>(&a.expect_line("result", Duration::from_secs(30))?)?)
+        }
+        None => None,
+    };
+    let daemon_rss_kib = rss_kib(daemon.pid());
+    let mut stale = Vec::with_capacity(names.len());
+    for name in &names {
+        let client = StatsClient::open(&ipc, name)?;
+        stale.push(client.query(Duration::from_secs(1)).ok().map(|s| s.frames_skipped_stale));
+    }
     daemon.interrupt();
     let _ = daemon.finish(Duration::from_secs(10));
-    let _ = producer.finish(Duration::from_secs(5));
-    let _ = consumer.finish(Duration::from_secs(5));
+    for p in producers.into_iter().chain(consumers).chain(all) {
+        let _ = p.finish(Duration::from_secs(5));
+    }
     let estimator = std::fs::read_to_string(&log)
         .ok()
         .and_then(|l| l.lines().find(|x| x.contains("fuseposed ready")).map(|x| x.to_owned()))
         .and_then(|l| l.split("estimator=").nth(1).map(|s| s.split(" deadline_ms").next().unwrap_or(s).to_owned()))
         .unwrap_or_default();
 
-    let mut histogram = latency::histogram();
     let deadline_ns = (deadline_ms * 1e6) as u64;
-    let mut late = 0;
-    for v in std::fs::read_to_string(&file)?.lines().filter_map(|l| l.parse::<u64>().ok()) {
-        histogram.saturating_record(v.max(1));
-        late += (v > deadline_ns) as u64;
+    let mut rows = Vec::with_capacity(names.len());
+    for (i, (name, counts)) in names.iter().zip(counts).enumerate() {
+        let mut histogram = latency::histogram();
+        let mut late = 0;
+        for v in std::fs::read_to_string(&files[i])?.lines().filter_map(|l| l.parse::<u64>().ok()) {
+            histogram.saturating_record(v.max(1));
+            late += (v > deadline_ns) as u64;
+        }
+        rows.push(RateResult {
+            camera: name.clone(),
+            fps,
+            deadline_ms,
+            sent: frames - warmup,
+            latency: Percentiles::of(&histogram),
+            histogram,
+            counts,
+            late_at_consumer: late,
+            daemon_stale: stale[i],
+            estimator: estimator.clone(),
+            daemon_rss_kib,
+            all: all_counts.clone(),
+        });
     }
-    Ok(RateResult {
-        fps,
-        deadline_ms,
-        sent: frames - warmup,
-        latency: Percentiles::of(&histogram),
-        histogram,
-        counts,
-        late_at_consumer: late,
-        daemon_stale,
-        estimator,
-    })
+    Ok(rows)
 }
 
 /// Runs every frame rate in turn; progress on stderr.
 pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
     anyhow::ensure!(args.weights.exists(), "{} does not exist (the network weights)", args.weights.display());
     anyhow::ensure!(args.fps.iter().all(|f| f.is_finite() && *f > 0.0), "--fps must be positive");
+    anyhow::ensure!((1..=8).contains(&args.cameras), "--cameras must be in 1..=8");
     std::fs::create_dir_all(&args.out)?;
     let load_before = loadavg::loadavg();
     let mut rates = Vec::new();
     for &fps in &args.fps {
-        rates.push(run_rate(args, fps)?);
+        rates.extend(run_rate(args, fps)?);
     }
-    let series: Vec<(String, Percentiles)> =
-        rates.iter().map(|r| (format!("{} FPS, {} objects", r.fps, args.objects_per_frame), r.latency)).collect();
+    let series: Vec<(String, Percentiles)> = rates
+        .iter()
+        .map(|r| (format!("{} {} FPS, {} objects", r.camera, r.fps, args.objects_per_frame), r.latency))
+        .collect();
     let png = args.out.join("e2e.png");
     let png = latency::plot_percentiles(
         &png,
@@ -280,7 +364,7 @@ pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
     .map(|_| png);
     let hlog = args.out.join("e2e.hlog");
     let tagged: Vec<(String, &Histogram<u64>)> =
-        rates.iter().map(|r| (format!("e2e.{}fps", r.fps), &r.histogram)).collect();
+        rates.iter().map(|r| (format!("e2e.{}.{}fps", r.camera, r.fps), &r.histogram)).collect();
     let duration_ns = (args.seconds * 1e9) as u64;
     let hlog = latency::write_hlog(&hlog, "fusepose-bench e2e: capture -> consumer latency, ns", &tagged, duration_ns)
         .ok()
@@ -292,12 +376,13 @@ pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
 pub fn render(r: &E2eReport) -> String {
     let a = &r.args;
     let mut s = format!(
-        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + producer ({} objects, rendered video) + consumer\n",
+        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + {} camera(s), each a producer ({} objects, rendered video) + consumer\n",
         a.threads.map_or_else(|| "machine's".to_owned(), |t| t.clamp(1, 2).to_string()),
         a.refine_iterations,
         !a.no_degrade,
         a.tracking,
         a.pin,
+        a.cameras,
         a.objects_per_frame
     );
     if let Some(e) = r.rates.first().map(|r| &r.estimator).filter(|e| !e.is_empty()) {
@@ -305,7 +390,8 @@ pub fn render(r: &E2eReport) -> String {
     }
     s.push_str(&format!("loadavg before: {}   cpus: {}\n\n", r.load_before, loadavg::cpus()));
     s.push_str(&format!(
-        "{:>6} {:>9} {:>8} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}\n",
+        "{:>6} {:>6} {:>9} {:>8} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8} {:>8} {:>8} {:>8} {:>7}\n",
+        "camera",
         "fps",
         "achieved",
         "deadline",
@@ -326,7 +412,8 @@ pub fn render(r: &E2eReport) -> String {
         let iters =
             if x.counts.objects > 0 { x.counts.refine_iterations as f64 / x.counts.objects as f64 } else { f64::NAN };
         s.push_str(&format!(
-            "{:>6.1} {:>9.2} {:>8.1} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>7.2}\n",
+            "{:>6} {:>6.1} {:>9.2} {:>8.1} {:>6} {:>6} {:>8} {:>8} {:>9} {:>8} {:>8.2} {:>8.2} {:>8.2} {:>8.2} {:>7.2}\n",
+            x.camera,
             x.fps,
             x.achieved_fps(),
             x.deadline_ms,
@@ -348,13 +435,34 @@ pub fn render(r: &E2eReport) -> String {
     for x in &r.rates {
         let objects = if x.counts.messages > 0 { x.counts.objects as f64 / x.counts.messages as f64 } else { 0.0 };
         s.push_str(&format!(
-            "{} fps: {:.2} objects per message, invalid {}, estimator failed {}, daemon stale drops {}\n",
+            "{} {} fps: {:.2} objects per message, invalid {}, estimator failed {}, daemon stale drops {}, messages of another camera {}\n",
+            x.camera,
             x.fps,
             objects,
             x.counts.invalid,
             x.counts.estimator_failed,
-            x.daemon_stale.map_or("n/a".into(), |v| v.to_string())
+            x.daemon_stale.map_or("n/a".into(), |v| v.to_string()),
+            x.counts.foreign
         ));
+    }
+    let mut fps_seen = Vec::new();
+    for x in r.rates.iter().filter(|x| x.camera == "cam0") {
+        if fps_seen.contains(&x.fps.to_bits()) {
+            continue;
+        }
+        fps_seen.push(x.fps.to_bits());
+        let mib = |k: u64| k as f64 / 1024.0;
+        let rss = x.daemon_rss_kib.map_or("n/a".into(), |[all, anon, shm]| {
+            format!("{:.1} MiB (private {:.1} MiB, shared memory {:.1} MiB)", mib(all), mib(anon), mib(shm))
+        });
+        s.push_str(&format!("{} fps: daemon RSS at the end {rss}", x.fps));
+        if let Some(all) = &x.all {
+            s.push_str(&format!(
+                "; all-cameras consumer: messages per camera {:?}, of a wrong camera {}, cell messages {} (up to {} cameras each)",
+                all.per_camera, all.foreign, all.cell_messages, all.cell_max_cameras
+            ));
+        }
+        s.push('\n');
     }
     if let Some(p) = &r.png {
         s.push_str(&format!("png: {}\n", p.display()));

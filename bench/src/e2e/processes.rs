@@ -3,12 +3,16 @@
 //!
 //! - `e2e-daemon CONFIG LOG`: the daemon — exactly what `fuseposed --config
 //!   CONFIG` runs (`engine::resolve` + `fusepose_daemon::run`), logging to LOG;
-//! - `e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES`: renders a video
-//!   sequence, prints `ready`, then publishes FRAMES frames at FPS (ping-pong
+//! - `e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES [CAMERA [GO_FILE]]`: renders a video
+//!   sequence, prints `ready`, waits for GO_FILE (when given: all producers start
+//!   together), then publishes FRAMES frames at FPS (ping-pong
 //!   over the video), capture time taken when each frame is loaned;
-//! - `e2e-consumer FRAMES WARMUP FILE`: receives every pose message through
+//! - `e2e-consumer FRAMES WARMUP FILE [CAMERA]`: receives every pose message through
 //!   the client library (default wait strategy), writes capture → consumer
-//!   latencies (ns, one per line) to FILE and prints `result <json>`.
+//!   latencies (ns, one per line) to FILE and prints `result <json>`;
+//! - `e2e-consumer-all SECONDS CAMERAS`: one process subscribed to every
+//!   camera (comma-separated names) and to the cell; prints `result <json>`
+//!   with the messages per camera, messages of a wrong camera, cell messages.
 
 use std::io::Write;
 use std::time::{Duration, Instant};
@@ -37,7 +41,13 @@ pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
 }
 
 pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
-    anyhow::ensure!(args.len() == 5, "usage: e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES");
+    anyhow::ensure!(
+        (5..=7).contains(&args.len()),
+        "usage: e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES [CAMERA [GO_FILE]]"
+    );
+    let camera = args.get(5).map_or(CAMERA, String::as_str);
+    // With several producers: start sending only once every one has rendered its video.
+    let go_file = args.get(6).map(std::path::PathBuf::from);
     let fps: f64 = args[0].parse()?;
     let frames: u64 = args[1].parse()?;
     let objects: usize = args[2].parse()?;
@@ -54,9 +64,16 @@ pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
         ..FrameLayout::vga_rgbd()
     };
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("e2e-producer"))?;
-    let mut producer = Producer::create(&ipc, CAMERA, layout)?;
+    let mut producer = Producer::create(&ipc, camera, layout)?;
     println!("ready");
     std::io::stdout().flush()?;
+    if let Some(go) = &go_file {
+        let waited = Instant::now();
+        while !go.exists() {
+            anyhow::ensure!(waited.elapsed() < Duration::from_secs(600), "{} never appeared", go.display());
+            std::thread::sleep(Duration::from_millis(1));
+        }
+    }
     let period = Duration::from_secs_f64(1.0 / fps);
     let t0 = Instant::now();
     for i in 0..frames {
@@ -97,14 +114,19 @@ pub struct ConsumerCounts {
     pub refine_iterations: u64,
     /// Seconds between the first and the last counted message.
     pub span_s: f64,
+    /// Messages whose camera id is not this consumer's camera (must stay 0).
+    #[serde(default)]
+    pub foreign: u64,
 }
 
 pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
-    anyhow::ensure!(args.len() == 3, "usage: e2e-consumer FRAMES WARMUP FILE");
+    anyhow::ensure!((3..=4).contains(&args.len()), "usage: e2e-consumer FRAMES WARMUP FILE [CAMERA]");
     let frames: u64 = args[0].parse()?;
     let warmup: u64 = args[1].parse()?;
+    let camera = args.get(3).map_or(CAMERA, String::as_str);
+    let own_id = fusepose_client::camera_id(camera);
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("e2e-consumer"))?;
-    let mut consumer = Consumer::open(&ipc, CAMERA)?;
+    let mut consumer = Consumer::open(&ipc, camera)?;
     println!("ready");
     std::io::stdout().flush()?;
     let mut latencies = Vec::with_capacity(frames as usize);
@@ -130,6 +152,10 @@ pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
         idle_since = Instant::now();
         let mut done = false;
         for msg in &batch {
+            if msg.camera_id != own_id {
+                counts.foreign += 1;
+                continue;
+            }
             done |= msg.frame_sequence + 1 >= frames;
             if msg.frame_sequence < warmup {
                 continue;
@@ -153,6 +179,53 @@ pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
     counts.span_s = first.map_or(0.0, |f| (last - f) as f64 / 1e9);
     let text: String = latencies.iter().map(|v| format!("{v}\n")).collect();
     std::fs::write(&args[2], text)?;
+    println!("result {}", serde_json::to_string(&counts)?);
+    Ok(())
+}
+
+/// What the all-cameras consumer counted.
+#[derive(Clone, Debug, Default, serde::Serialize, serde::Deserialize)]
+pub struct AllCounts {
+    /// Pose messages per camera, in the order given.
+    pub per_camera: Vec<u64>,
+    /// Messages whose camera id did not match the service they came on.
+    pub foreign: u64,
+    /// Cell messages, and the most cameras one of them combined.
+    pub cell_messages: u64,
+    pub cell_max_cameras: u16,
+}
+
+pub fn consumer_all_main(args: &[String]) -> anyhow::Result<()> {
+    anyhow::ensure!(args.len() == 2, "usage: e2e-consumer-all SECONDS CAMERAS");
+    let seconds: f64 = args[0].parse()?;
+    let names: Vec<&str> = args[1].split(',').collect();
+    let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("e2e-consumer-all"))?;
+    let mut consumers = names.iter().map(|n| Consumer::open(&ipc, n)).collect::<Result<Vec<_>, _>>()?;
+    let mut cell = fusepose_client::CellConsumer::open(&ipc)?;
+    println!("ready");
+    std::io::stdout().flush()?;
+    let mut counts = AllCounts { per_camera: vec![0; names.len()], ..AllCounts::default() };
+    let (mut batch, mut cells) = (Vec::with_capacity(8), Vec::with_capacity(8));
+    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    while Instant::now() < end {
+        for (i, c) in consumers.iter_mut().enumerate() {
+            batch.clear();
+            c.drain(&mut batch)?;
+            let id = fusepose_client::camera_id(names[i]);
+            for msg in &batch {
+                if msg.camera_id == id {
+                    counts.per_camera[i] += 1;
+                } else {
+                    counts.foreign += 1;
+                }
+            }
+        }
+        cells.clear();
+        cell.drain(&mut cells)?;
+        counts.cell_messages += cells.len() as u64;
+        counts.cell_max_cameras = cells.iter().map(|m| m.camera_count).fold(counts.cell_max_cameras, u16::max);
+        std::thread::sleep(Duration::from_millis(5));
+    }
     println!("result {}", serde_json::to_string(&counts)?);
     Ok(())
 }

@@ -329,9 +329,12 @@ struct Shared {
     results: Mutex<Vec<Option<InstanceResult>>>,
 }
 
+/// The persistent second thread. Sibling estimators (one per camera, see
+/// [`NetEstimator::sibling`]) share it; `frame` serialises their frames.
 struct Worker {
     shared: Arc<Shared>,
     handle: Option<JoinHandle<()>>,
+    frame: Mutex<()>,
 }
 
 impl Worker {
@@ -389,7 +392,7 @@ impl Worker {
                 }
             })
             .ok()?;
-        Some(Self { shared, handle: Some(handle) })
+        Some(Self { shared, handle: Some(handle), frame: Mutex::new(()) })
     }
 }
 
@@ -443,9 +446,9 @@ pub struct NetCounters {
 /// The fusion-network estimator.
 pub struct NetEstimator {
     engine: Arc<Engine>,
-    file: WeightFile,
+    file: Arc<WeightFile>,
     scratch: Scratch,
-    worker: Option<Worker>,
+    worker: Option<Arc<Worker>>,
     /// Sizes the buffers were made for: (N, S, max instances).
     sizes: (usize, usize, usize),
     mine: Vec<Option<InstanceResult>>,
@@ -481,13 +484,13 @@ impl NetEstimator {
         let fit = options.tracking.map(|_| Arc::new(FitCheck::new(objects)));
         let tracks = options.tracking.map(|t| Tracks::new(t, c.num_classes));
         let worker = if options.threads >= 2 {
-            Worker::spawn(engine.clone(), fit.clone(), options.pin_worker_cpu, n, s, cap)
+            Worker::spawn(engine.clone(), fit.clone(), options.pin_worker_cpu, n, s, cap).map(Arc::new)
         } else {
             None
         };
         Ok(Self {
             engine,
-            file,
+            file: Arc::new(file),
             scratch,
             worker,
             sizes: (n, s, cap),
@@ -504,6 +507,40 @@ impl NetEstimator {
             priors: Vec::with_capacity(cap),
             counters: NetCounters::default(),
         })
+    }
+
+    /// A second estimator for another camera on the same weights: it shares
+    /// this one's network engine (one copy of the weights in memory), weight
+    /// file and worker thread, and has its own buffers, cost model, tracks and
+    /// counters. Frames of siblings never run at the same time (they take
+    /// turns on the worker).
+    pub fn sibling(&self) -> Self {
+        let c = &self.engine.config;
+        let (n, s, cap) = (c.num_points, c.crop_size, 8);
+        Self {
+            engine: self.engine.clone(),
+            file: self.file.clone(),
+            scratch: Scratch::new(c, n, s),
+            worker: self.worker.clone(),
+            sizes: (n, s, cap),
+            mine: Vec::with_capacity(cap),
+            refine_iterations: self.refine_iterations,
+            frame_cap: None,
+            deadline: None,
+            costs: self.costs,
+            last_plan: FramePlan::full(self.refine_iterations, n),
+            last_degraded: false,
+            last_shed: 0,
+            tracks: self.tracks.as_ref().map(|t| Tracks::new(*t.config(), c.num_classes)),
+            fit: self.fit.clone(),
+            priors: Vec::with_capacity(cap),
+            counters: NetCounters::default(),
+        }
+    }
+
+    /// Whether `other` shares this estimator's network engine (weights in memory).
+    pub fn shares_weights_with(&self, other: &NetEstimator) -> bool {
+        Arc::ptr_eq(&self.engine, &other.engine)
     }
 
     /// The weight file (config, objects, training record).
@@ -585,6 +622,7 @@ impl NetEstimator {
         self.mine.reserve(cap);
         self.priors.reserve(cap);
         if let Some(w) = &self.worker {
+            let _turn = w.frame.lock().unwrap_or_else(|e| e.into_inner());
             w.shared.msg.put(Msg::Resize(n, s, cap));
             w.shared.done.take();
         }
@@ -692,8 +730,9 @@ impl Estimator for NetEstimator {
         self.mine.clear();
         let mut mine = std::mem::take(&mut self.mine);
         if threads == 2
-            && let Some(w) = self.worker.as_ref()
+            && let Some(w) = self.worker.clone()
         {
+            let turn = w.frame.lock().unwrap_or_else(|e| e.into_inner());
             w.shared.msg.put(Msg::Run(Task {
                 ws,
                 priors: self.priors.as_slice(),
@@ -710,19 +749,21 @@ impl Estimator for NetEstimator {
             let guard = WaitGuard { shared: &w.shared, ok: None };
             run_share(&self.engine, &mut self.scratch, ws, &self.priors, 0, count, &job, &mut mine);
             let ok = guard.wait();
-            let shared = w.shared.clone();
-            let theirs = shared.results.lock().unwrap_or_else(|e| e.into_inner());
+            let theirs = w.shared.results.lock().unwrap_or_else(|e| e.into_inner());
             if ok && theirs.len() == count / 2 {
                 for i in 0..count {
                     let r = if i % 2 == 0 { mine[i / 2] } else { theirs[i / 2] };
                     self.absorb(r.as_ref(), out);
                 }
+                drop(theirs);
+                drop(turn);
                 self.mine = mine;
                 self.finish_frame(plan_degraded);
                 return Ok(());
             }
             // The worker panicked: this frame and later ones run on the caller's thread.
             drop(theirs);
+            drop(turn);
             self.worker = None;
             out.clear();
             mine.clear();

@@ -406,7 +406,11 @@ fn run(args: &[String]) -> anyhow::Result<()> {
         );
     }
     let p99 = |w: &Window| w.histogram.value_at_quantile(0.99) as f64 / 1e6;
-    let full: Vec<&Window> = windows.iter().filter(|w| !w.histogram.is_empty()).collect();
+    // Drift compares whole windows: a trailing part-window (the last seconds
+    // after the final full window) holds too few frames for a p99.
+    let most = windows.iter().map(|w| w.histogram.len()).max().unwrap_or(0);
+    let full: Vec<&Window> =
+        windows.iter().filter(|w| !w.histogram.is_empty() && 2 * w.histogram.len() >= most).collect();
     let (p99_first, p99_last) = (full.first().map_or(0.0, |w| p99(w)), full.last().map_or(0.0, |w| p99(w)));
     let p99_max = full.iter().map(|w| p99(w)).fold(0.0, f64::max);
     let p99_drift = if p99_first > 0.0 { (p99_last - p99_first) / p99_first * 100.0 } else { 0.0 };
