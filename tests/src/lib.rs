@@ -238,6 +238,13 @@ pub fn package_binary(name: &str) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
+/// The `key=number` fields of a line starting with `prefix` (None when it
+/// does not, or a field is not a number).
+fn key_values<'a>(line: &'a str, prefix: &str) -> Option<std::collections::HashMap<&'a str, u64>> {
+    let rest = line.strip_prefix(prefix)?;
+    rest.split_whitespace().map(|kv| kv.split_once('=').and_then(|(k, v)| Some((k, v.parse().ok()?)))).collect()
+}
+
 /// One line printed by `fp-test-consumer` per pose message.
 #[derive(Clone, Debug, PartialEq)]
 pub struct PoseLine {
@@ -254,12 +261,7 @@ pub struct PoseLine {
 impl PoseLine {
     /// Parses `pose seq=.. status=.. reason=.. objects=.. camera=.. capture=.. received=.. published=..`.
     pub fn parse(line: &str) -> Option<Self> {
-        let rest = line.strip_prefix("pose ")?;
-        let mut fields = std::collections::HashMap::new();
-        for kv in rest.split_whitespace() {
-            let (k, v) = kv.split_once('=')?;
-            fields.insert(k, v.parse::<u64>().ok()?);
-        }
+        let fields = key_values(line, "pose ")?;
         Some(Self {
             sequence: *fields.get("seq")?,
             status: *fields.get("status")? as u32,
@@ -300,12 +302,7 @@ pub struct CellLine {
 impl CellLine {
     /// Parses `cell seq=.. cameras=.. objects=.. trigger=.. published=..`.
     pub fn parse(line: &str) -> Option<Self> {
-        let rest = line.strip_prefix("cell ")?;
-        let mut fields = std::collections::HashMap::new();
-        for kv in rest.split_whitespace() {
-            let (k, v) = kv.split_once('=')?;
-            fields.insert(k, v.parse::<u64>().ok()?);
-        }
+        let fields = key_values(line, "cell ")?;
         Some(Self {
             sequence: *fields.get("seq")?,
             cameras: *fields.get("cameras")? as u16,

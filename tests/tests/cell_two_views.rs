@@ -6,8 +6,8 @@
 use std::time::{Duration, Instant};
 
 use fusepose_client::{
-    CellConsumer, CellPoseMessage, ColorFormat, Consumer, DepthFormat, DepthMut, FrameLayout, Ipc, LabelFormat,
-    LabelsMut, PoseMessage, Producer, camera_id,
+    CellConsumer, CellPoseMessage, Consumer, DepthMut, FrameLayout, Ipc, LabelFormat, LabelsMut, PoseMessage, Producer,
+    camera_id,
 };
 use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::render::{RenderItem, RenderSettings, RenderTarget, render_scene};
@@ -104,6 +104,35 @@ fn send_scene(
     Ok(frame.send()?)
 }
 
+/// A daemon (the shipped network, true class labels) serving cameras `a` and
+/// `b` as `cameras_toml` declares them, and a producer and consumer of each.
+struct Rig {
+    _daemon: Proc,
+    ipc: Ipc,
+    producers: [Producer; 2],
+    consumers: [Consumer; 2],
+}
+
+fn two_camera_rig(env: &TestEnv, cameras_toml: &str, cell_toml: &str) -> anyhow::Result<Rig> {
+    let weights = workspace_root()?.join("models/builtin.safetensors");
+    let config = env.dir.path().join("fuseposed.toml");
+    std::fs::write(
+        &config,
+        format!(
+            "{cameras_toml}[estimator]\nkind = \"net\"\nweights = {:?}\nmasks = \"labels\"\ndeadline_aware = false\n\n{cell_toml}[stats]\nhlog_path = \"\"\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\n",
+            weights.display().to_string(),
+            env.iox_root,
+            env.prefix
+        ),
+    )?;
+    let daemon = start_daemon_for(env, &config, "a")?;
+    let layout = FrameLayout { labels: Some(LabelFormat::U16), ..rendered_layout(&intrinsics()) };
+    let ipc = Ipc::new(&env.ipc_options())?;
+    let producers = [Producer::create(&ipc, "a", layout)?, Producer::create(&ipc, "b", layout)?];
+    let consumers = [Consumer::open(&ipc, "a")?, Consumer::open(&ipc, "b")?];
+    Ok(Rig { _daemon: daemon, ipc, producers, consumers })
+}
+
 fn wait_cell(cell: &mut CellConsumer, trigger: u32, timeout: Duration) -> anyhow::Result<CellPoseMessage> {
     let end = Instant::now() + timeout;
     let mut all = Vec::new();
@@ -134,40 +163,16 @@ fn view_add_s(
 fn an_object_seen_by_two_cameras_is_one_cell_entry_no_worse_than_the_better_view() -> anyhow::Result<()> {
     let env = TestEnv::new("cell")?;
     let cams = cameras();
-    let weights = workspace_root()?.join("models/builtin.safetensors");
-    let config = env.dir.path().join("fuseposed.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "{}{}[estimator]\nkind = \"net\"\nweights = {:?}\nmasks = \"labels\"\ndeadline_aware = false\n\n[cell]\nmax_age_ms = 60000\n\n[stats]\nhlog_path = \"\"\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\n",
-            extrinsics_toml("a", &cams[0]),
-            extrinsics_toml("b", &cams[1]),
-            weights.display().to_string(),
-            env.iox_root,
-            env.prefix
-        ),
-    )?;
-    let _daemon = start_daemon_for(&env, &config, "a")?;
-
+    let cameras = format!("{}{}", extrinsics_toml("a", &cams[0]), extrinsics_toml("b", &cams[1]));
+    let mut rig = two_camera_rig(&env, &cameras, "[cell]\nmax_age_ms = 60000\n\n")?;
     let k = intrinsics();
     let objects = fusepose_scene::builtin::builtin_objects();
-    let layout = FrameLayout {
-        width: k.width,
-        height: k.height,
-        color_format: ColorFormat::Rgb8,
-        depth_format: DepthFormat::U16,
-        depth_scale: 1e-4,
-        labels: Some(LabelFormat::U16),
-    };
-    let ipc = Ipc::new(&env.ipc_options())?;
-    let mut producers = [Producer::create(&ipc, "a", layout)?, Producer::create(&ipc, "b", layout)?];
-    let mut consumers = [Consumer::open(&ipc, "a")?, Consumer::open(&ipc, "b")?];
-    let mut cell = CellConsumer::open(&ipc)?;
+    let mut cell = CellConsumer::open(&rig.ipc)?;
 
     let mut views = Vec::new();
-    for i in 0..2 {
-        let seq = send_view(&mut producers[i], &k, &cams[i], &objects)?;
-        views.push(wait_for_sequence(&mut consumers[i], seq, Duration::from_secs(30))?);
+    for ((producer, consumer), cam) in rig.producers.iter_mut().zip(rig.consumers.iter_mut()).zip(&cams) {
+        let seq = send_view(producer, &k, cam, &objects)?;
+        views.push(wait_for_sequence(consumer, seq, Duration::from_secs(30))?);
     }
     let fused = wait_cell(&mut cell, camera_id("b"), Duration::from_secs(10))?;
 
@@ -270,31 +275,9 @@ fn study_scene(seed: u64) -> StudyScene {
 fn fusion_study_on_tuning_scenes() -> anyhow::Result<()> {
     use fusepose_daemon::cell::{CellFuser, CellSource, Fusion};
     let env = TestEnv::new("cellstudy")?;
-    let weights = workspace_root()?.join("models/builtin.safetensors");
-    let config = env.dir.path().join("fuseposed.toml");
-    std::fs::write(
-        &config,
-        format!(
-            "cameras = [\"a\", \"b\"]\n[estimator]\nkind = \"net\"\nweights = {:?}\nmasks = \"labels\"\ndeadline_aware = false\n\n[stats]\nhlog_path = \"\"\n\n[ipc]\nroot_path = {:?}\nprefix = {:?}\n",
-            weights.display().to_string(),
-            env.iox_root,
-            env.prefix
-        ),
-    )?;
-    let _daemon = start_daemon_for(&env, &config, "a")?;
+    let mut rig = two_camera_rig(&env, "cameras = [\"a\", \"b\"]\n", "")?;
     let k = intrinsics();
     let objects = fusepose_scene::builtin::builtin_objects();
-    let layout = FrameLayout {
-        width: k.width,
-        height: k.height,
-        color_format: ColorFormat::Rgb8,
-        depth_format: DepthFormat::U16,
-        depth_scale: 1e-4,
-        labels: Some(LabelFormat::U16),
-    };
-    let ipc = Ipc::new(&env.ipc_options())?;
-    let mut producers = [Producer::create(&ipc, "a", layout)?, Producer::create(&ipc, "b", layout)?];
-    let mut consumers = [Consumer::open(&ipc, "a")?, Consumer::open(&ipc, "b")?];
     let merge: Vec<f64> = objects.objects.iter().map(|o| 0.5 * o.diameter).collect();
     let variants: [(&str, Fusion, f64); 3] = [
         ("best fit: the view with the smallest verified depth residual [default]", Fusion::BestFit, 20.0),
@@ -309,8 +292,8 @@ fn fusion_study_on_tuning_scenes() -> anyhow::Result<()> {
         let mut views = Vec::new();
         let mut skip = false;
         for i in 0..2 {
-            match send_scene(&mut producers[i], &k, &scene.cams[i], &objects, &scene.classes, &scene.truth) {
-                Ok(seq) => views.push(wait_for_sequence(&mut consumers[i], seq, Duration::from_secs(30))?),
+            match send_scene(&mut rig.producers[i], &k, &scene.cams[i], &objects, &scene.classes, &scene.truth) {
+                Ok(seq) => views.push(wait_for_sequence(&mut rig.consumers[i], seq, Duration::from_secs(30))?),
                 Err(_) => skip = true,
             }
         }
