@@ -165,9 +165,32 @@ fn python_producer_consumer_and_stats_query_against_a_real_daemon() -> anyhow::R
     assert_eq!(u64_of(s, "frames_processed"), s["since_start"]["end_to_end"]["count"].as_u64().unwrap(), "{s}");
     let rust_stats = query_stats(&env, Duration::from_secs(5))?;
     assert!(rust_stats.frames_processed >= u64_of(s, "frames_processed"));
+
+    // The cell service decoded from PROTOCOL.md's layout: one camera with the
+    // identity extrinsics, so each cell object is that frame's pose as it was.
+    let cells = json_lines(&stdout, "cell");
+    assert!(!cells.is_empty(), "the Python client read no cell message:\n{stdout}\n{stderr}");
+    let mut cell_objects = 0;
+    for c in &cells {
+        assert_eq!(u64_of(c, "format_version"), fusepose_client::WIRE_VERSION as u64);
+        assert_eq!((u64_of(c, "camera_count"), u64_of(c, "trigger_camera_id")), (1, camera_id("cam0") as u64), "{c}");
+        for o in c["objects"].as_array().unwrap() {
+            let view = &o["views"][0];
+            assert_eq!((u64_of(o, "view_count"), u64_of(view, "camera_id")), (1, camera_id("cam0") as u64), "{o}");
+            let Some(rust) = by_sequence.get(&u64_of(view, "frame_sequence")) else { continue };
+            let r = &rust.objects()[u64_of(view, "instance_id") as usize];
+            assert_eq!(u64_of(o, "class_id"), r.class_id as u64, "{o}");
+            let t: Vec<f64> = o["translation_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+            assert_eq!(t, r.translation_m, "{o}");
+            assert_eq!(u64_of(view, "capture_time_ns"), rust.capture_time_ns);
+            cell_objects += 1;
+        }
+    }
+    assert!(cell_objects > 0, "no cell object matched a pose the Rust client saw:\n{stdout}");
     println!(
-        "RESULT python client: {compared} of {} messages decoded identically to the Rust client; stats {s}",
-        poses.len()
+        "RESULT python client: {compared} of {} messages decoded identically to the Rust client; {} cell messages, {cell_objects} objects checked; stats {s}",
+        poses.len(),
+        cells.len()
     );
     Ok(())
 }

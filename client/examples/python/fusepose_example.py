@@ -23,7 +23,7 @@ import time
 import iceoryx2 as iox2
 
 import fusepose_wire as w
-from fusepose_ipc import CameraServices, create_node
+from fusepose_ipc import CameraServices, CellServices, create_node
 
 
 def monotonic_ns() -> int:
@@ -115,6 +115,25 @@ class PoseReader:
             sample.delete()  # give the sample back at once (2 may be held)
 
 
+class CellReader:
+    """Receives the cell's messages (every camera's objects in the cell frame)."""
+
+    def __init__(self, node):
+        self.subscriber = CellServices(node).poses.subscriber_builder().create()
+
+    def drain(self) -> list:
+        out = []
+        while True:
+            sample = self.subscriber.receive()
+            if sample is None:
+                return out
+            msg = sample.payload().contents
+            if msg.format_version != w.WIRE_VERSION:
+                raise RuntimeError(f"cell message of wire version {msg.format_version}, this client speaks {w.WIRE_VERSION}")
+            out.append(w.cell_to_dict(msg))
+            sample.delete()
+
+
 def query_stats(services: CameraServices, timeout_s: float = 2.0) -> dict:
     client = services.stats.client_builder().create()
     request = w.StatsRequest(w.WIRE_VERSION)
@@ -170,6 +189,7 @@ def main() -> int:
 
     camera = Camera(services, args.camera, labels=not args.no_labels)
     reader = PoseReader(services) if args.role == "run" else None
+    cell = CellReader(node) if args.role == "run" else None
     started = monotonic_ns()
     answered = set()
     period = 1.0 / args.fps
@@ -193,6 +213,9 @@ def main() -> int:
             if msg["published_time_ns"] >= started:
                 answered.add(msg["frame_sequence"])
                 print_line("pose", msg)
+    for msg in cell.drain():
+        if msg["published_time_ns"] >= started:
+            print_line("cell", msg)
     print_line("stats", query_stats(services))
     print(f"done sent={args.frames} answered={len(answered)}", flush=True)
     return 0 if answered else 1

@@ -9,7 +9,7 @@ import os
 
 import iceoryx2 as iox2
 
-from fusepose_wire import WIRE_VERSION, FrameHeader, PoseMessage, StatsRequest, StatsSnapshot
+from fusepose_wire import WIRE_VERSION, CellPoseMessage, FrameHeader, PoseMessage, StatsRequest, StatsSnapshot
 
 MAX_NODES = 32
 
@@ -97,3 +97,24 @@ class CameraServices:
             .max_nodes(MAX_NODES)
             .open_or_create_with_attributes(_attributes())
         )
+
+
+class CellServices:
+    """`fusepose/cell/poses`: every camera's objects in the cell frame (PROTOCOL.md, "Cell poses")."""
+
+    NAME = "fusepose/cell/poses"
+
+    def __init__(self, node):
+        self.poses = (
+            node.service_builder(iox2.ServiceName.new(self.NAME))
+            .publish_subscribe(CellPoseMessage)
+            .enable_safe_overflow(True)
+            .subscriber_max_buffer_size(4)
+            .subscriber_max_borrowed_samples(2)
+            .history_size(1)
+            .max_publishers(1)
+            .max_subscribers(16)
+            .max_nodes(MAX_NODES)
+            .open_or_create_with_attributes(_attributes())
+        )
+        self.events = _event(node, self.NAME)

@@ -12,6 +12,9 @@ WIRE_VERSION = 3
 FRAME_MAGIC = int.from_bytes(b"FPFR", "little")
 HEADER_SIZE = 128
 MAX_OBJECTS = 32
+# Cell poses (PROTOCOL.md, "Cell poses"): objects per message, views listed per object.
+MAX_CELL_OBJECTS = 64
+MAX_CELL_VIEWS = 4
 
 # FrameHeader format codes.
 COLOR_RGB8, COLOR_BGR8 = 1, 2
@@ -202,6 +205,66 @@ class StatsSnapshot(ctypes.Structure):
         return "fusepose::StatsSnapshot"
 
 
+class CellView(ctypes.Structure):
+    """One camera's sight of a cell object (32 bytes)."""
+
+    _fields_ = [
+        ("camera_id", ctypes.c_uint32),
+        ("instance_id", ctypes.c_uint16),
+        ("flags", ctypes.c_uint16),
+        ("confidence", ctypes.c_float),
+        ("offset_m", ctypes.c_float),
+        ("frame_sequence", ctypes.c_uint64),
+        ("capture_time_ns", ctypes.c_uint64),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "fusepose::CellView"
+
+
+class CellObject(ctypes.Structure):
+    """One object in the cell frame (216 bytes)."""
+
+    _fields_ = [
+        ("class_id", ctypes.c_uint16),
+        ("view_count", ctypes.c_uint16),
+        ("flags", ctypes.c_uint16),
+        ("reserved", ctypes.c_uint16),
+        ("confidence", ctypes.c_float),
+        ("spread_m", ctypes.c_float),
+        ("quaternion", ctypes.c_double * 4),
+        ("translation_m", ctypes.c_double * 3),
+        ("newest_capture_time_ns", ctypes.c_uint64),
+        ("oldest_capture_time_ns", ctypes.c_uint64),
+        ("views", CellView * MAX_CELL_VIEWS),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "fusepose::CellObject"
+
+
+class CellPoseMessage(ctypes.Structure):
+    """Every camera's objects in the cell frame (13856 bytes, alignment 8)."""
+
+    _fields_ = [
+        ("format_version", ctypes.c_uint16),
+        ("object_count", ctypes.c_uint16),
+        ("camera_count", ctypes.c_uint16),
+        ("truncated", ctypes.c_uint16),
+        ("trigger_camera_id", ctypes.c_uint32),
+        ("reserved", ctypes.c_uint32),
+        ("sequence", ctypes.c_uint64),
+        ("published_time_ns", ctypes.c_uint64),
+        ("objects", CellObject * MAX_CELL_OBJECTS),
+    ]
+
+    @staticmethod
+    def type_name() -> str:
+        return "fusepose::CellPoseMessage"
+
+
 def _check(struct, size, align, offsets):
     assert ctypes.sizeof(struct) == size, f"{struct.__name__}: size {ctypes.sizeof(struct)} != {size}"
     assert ctypes.alignment(struct) == align, f"{struct.__name__}: alignment {ctypes.alignment(struct)} != {align}"
@@ -222,6 +285,12 @@ _check(LatencySummary, 48, 8, {"max_ns": 40})
 _check(StatsSnapshot, 1032, 8, {"frames_received": 32, "invalid_by_reason": 72, "deadline_misses": 304,
                                 "producer_restarts": 328, "since_start": 336, "last_window": 672,
                                 "poses_failed_verification": 1008, "objects_shed": 1016, "frames_degraded": 1024})
+_check(CellView, 32, 8, {"instance_id": 4, "flags": 6, "confidence": 8, "offset_m": 12, "frame_sequence": 16,
+                         "capture_time_ns": 24})
+_check(CellObject, 216, 8, {"confidence": 8, "spread_m": 12, "quaternion": 16, "translation_m": 48,
+                            "newest_capture_time_ns": 72, "oldest_capture_time_ns": 80, "views": 88})
+_check(CellPoseMessage, 13856, 8, {"camera_count": 4, "truncated": 6, "trigger_camera_id": 8, "sequence": 16,
+                                   "published_time_ns": 24, "objects": 32})
 
 
 def align8(n: int) -> int:
@@ -284,4 +353,35 @@ def stats_to_dict(s: StatsSnapshot) -> dict:
         "deadline_misses": s.deadline_misses,
         "estimator_failures": s.estimator_failures,
         "since_start": {TIMELINES[i]: summary(t) for i, t in enumerate(s.since_start) if t.count},
+    }
+
+
+def cell_to_dict(msg: CellPoseMessage) -> dict:
+    """A cell message as plain values (the valid objects and their listed views only)."""
+    def view(v):
+        return {"camera_id": v.camera_id, "instance_id": v.instance_id, "flags": v.flags, "confidence": v.confidence,
+                "offset_m": v.offset_m, "frame_sequence": v.frame_sequence, "capture_time_ns": v.capture_time_ns}
+
+    return {
+        "format_version": msg.format_version,
+        "camera_count": msg.camera_count,
+        "truncated": msg.truncated,
+        "trigger_camera_id": msg.trigger_camera_id,
+        "sequence": msg.sequence,
+        "published_time_ns": msg.published_time_ns,
+        "objects": [
+            {
+                "class_id": o.class_id,
+                "view_count": o.view_count,
+                "flags": o.flags,
+                "confidence": o.confidence,
+                "spread_m": o.spread_m,
+                "quaternion_xyzw": list(o.quaternion),
+                "translation_m": list(o.translation_m),
+                "newest_capture_time_ns": o.newest_capture_time_ns,
+                "oldest_capture_time_ns": o.oldest_capture_time_ns,
+                "views": [view(v) for v in o.views[: min(o.view_count, MAX_CELL_VIEWS)]],
+            }
+            for o in msg.objects[: min(msg.object_count, MAX_CELL_OBJECTS)]
+        ],
     }
