@@ -87,6 +87,20 @@ class Camera:
         self.notifier.notify()  # event id 0; the daemon only needs the wake-up
 
 
+def drain(subscriber, to_dict, what: str) -> list:
+    """Every message waiting on `subscriber`, oldest first, as dicts; refuses another wire version."""
+    out = []
+    while True:
+        sample = subscriber.receive()
+        if sample is None:
+            return out
+        msg = sample.payload().contents
+        if msg.format_version != w.WIRE_VERSION:
+            raise RuntimeError(f"{what} of wire version {msg.format_version}, this client speaks {w.WIRE_VERSION}")
+        out.append(to_dict(msg))
+        sample.delete()  # give the sample back at once (2 may be held)
+
+
 class PoseReader:
     """Receives every pose message of the camera."""
 
@@ -103,16 +117,7 @@ class PoseReader:
         return out
 
     def drain(self) -> list:
-        out = []
-        while True:
-            sample = self.subscriber.receive()
-            if sample is None:
-                return out
-            msg = sample.payload().contents
-            if msg.format_version != w.WIRE_VERSION:
-                raise RuntimeError(f"pose message of wire version {msg.format_version}, this client speaks {w.WIRE_VERSION}")
-            out.append(w.pose_to_dict(msg))
-            sample.delete()  # give the sample back at once (2 may be held)
+        return drain(self.subscriber, w.pose_to_dict, "pose message")
 
 
 class CellReader:
@@ -122,16 +127,7 @@ class CellReader:
         self.subscriber = CellServices(node).poses.subscriber_builder().create()
 
     def drain(self) -> list:
-        out = []
-        while True:
-            sample = self.subscriber.receive()
-            if sample is None:
-                return out
-            msg = sample.payload().contents
-            if msg.format_version != w.WIRE_VERSION:
-                raise RuntimeError(f"cell message of wire version {msg.format_version}, this client speaks {w.WIRE_VERSION}")
-            out.append(w.cell_to_dict(msg))
-            sample.delete()
+        return drain(self.subscriber, w.cell_to_dict, "cell message")
 
 
 def query_stats(services: CameraServices, timeout_s: float = 2.0) -> dict:
