@@ -85,22 +85,25 @@ fn text(msg: &PoseMessage) -> String {
         out.push_str(&format!(" ({})", reason.name()));
     }
     for o in msg.objects() {
-        let t = o.translation_m.map(|v| v * 1e3);
-        let rpy = rpy_from_quaternion(o.quaternion).map(f64::to_degrees);
         out.push_str(&format!(
-            "\n  {:<16} #{:<2} xyz [{:>8.1} {:>8.1} {:>8.1}] mm  rpy [{:>7.1} {:>7.1} {:>7.1}] deg  conf {:.2}",
+            "\n  {:<16} #{:<2} {}  conf {:.2}",
             object_name(o.class_id),
             o.instance_id,
-            t[0],
-            t[1],
-            t[2],
-            rpy[0],
-            rpy[1],
-            rpy[2],
+            pose_text(o.translation_m, o.quaternion),
             o.confidence
         ));
     }
     out
+}
+
+/// `xyz [x y z] mm  rpy [roll pitch yaw] deg` of a pose (metres, quaternion `[x, y, z, w]`).
+fn pose_text(translation_m: [f64; 3], quaternion: [f64; 4]) -> String {
+    let t = translation_m.map(|v| v * 1e3);
+    let rpy = rpy_from_quaternion(quaternion).map(f64::to_degrees);
+    format!(
+        "xyz [{:>8.1} {:>8.1} {:>8.1}] mm  rpy [{:>7.1} {:>7.1} {:>7.1}] deg",
+        t[0], t[1], t[2], rpy[0], rpy[1], rpy[2]
+    )
 }
 
 /// A float as JSON: `null` when NaN/infinite (not verified), else `decimals` places.

@@ -178,11 +178,6 @@ impl CameraState {
         self.stable_ids = ids;
     }
 
-    /// Capture → publish budget of this camera's frames, ns.
-    pub fn deadline_ns(&self) -> u64 {
-        self.deadline_ns
-    }
-
     /// Changes the budget (configuration reload).
     pub fn set_deadline_ns(&mut self, deadline_ns: u64) {
         self.deadline_ns = deadline_ns;

@@ -35,18 +35,11 @@ pub struct EngineCatalog<'a> {
     main: &'a EngineSpec,
     main_objects: Rc<ObjectSet>,
     extra: Vec<(EstimatorConfig, Rc<EngineSpec>)>,
-    deadline_aware: bool,
 }
 
 impl<'a> EngineCatalog<'a> {
     pub fn new(main_config: &EstimatorConfig, main: &'a EngineSpec, main_objects: Rc<ObjectSet>) -> Self {
-        Self {
-            main_config: main_config.clone(),
-            main,
-            main_objects,
-            extra: Vec::new(),
-            deadline_aware: main_config.deadline_aware,
-        }
+        Self { main_config: main_config.clone(), main, main_objects, extra: Vec::new() }
     }
 
     /// The cell's object set (the daemon-wide `[estimator] objects`).
@@ -72,7 +65,7 @@ impl<'a> EngineCatalog<'a> {
             };
             PoseEngine::with_max_instances(&spec, settings.max_instances)?
         };
-        engine.set_deadline_aware(self.deadline_aware);
+        engine.set_deadline_aware(self.main_config.deadline_aware);
         Ok(engine)
     }
 

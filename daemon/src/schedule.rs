@@ -11,18 +11,19 @@
 //! the sooner of the two ends (fewer refiner iterations, fewer points,
 //! the smallest instances shed), so a frame is degraded rather than late.
 
+use fusepose_client::ArrivalPredictor;
+
 /// A camera counts as active while its last frame is at most this many of its periods old.
 const ACTIVE_PERIODS: u64 = 3;
 /// Period assumed for a camera whose period is not learned yet, ns.
 const UNKNOWN_PERIOD_NS: u64 = 41_666_667;
-/// Weight of a new inter-frame interval in the smoothed period.
-const PERIOD_GAIN: f64 = 0.1;
 
 /// What the scheduler knows about one camera.
 #[derive(Clone, Copy, Debug, Default, PartialEq)]
 pub struct CameraClock {
-    /// Smoothed interval between capture times of consecutive frames, ns.
-    period_ns: Option<f64>,
+    /// The frame period, learned from capture times (skipped frames and
+    /// pauses count as whole periods, not as longer ones).
+    captures: ArrivalPredictor,
     last_capture_ns: Option<u64>,
     /// When the loop last received a frame of this camera (its clock), ns.
     last_arrival_ns: Option<u64>,
@@ -31,23 +32,16 @@ pub struct CameraClock {
 impl CameraClock {
     /// Records a received frame (capture time from its header, arrival on the loop's clock).
     pub fn observe(&mut self, capture_ns: u64, arrival_ns: u64) {
-        if let Some(last) = self.last_capture_ns
-            && capture_ns > last
-        {
-            let dt = (capture_ns - last) as f64;
-            // Gaps of several periods (a paused camera) do not teach the period.
-            let typical = self.period_ns.unwrap_or(dt);
-            if dt <= 4.0 * typical {
-                self.period_ns = Some(self.period_ns.map_or(dt, |p| p + PERIOD_GAIN * (dt - p)));
-            }
+        if self.last_capture_ns.is_none_or(|last| capture_ns > last) {
+            self.captures.observe(capture_ns);
+            self.last_capture_ns = Some(capture_ns);
         }
-        self.last_capture_ns = Some(capture_ns);
         self.last_arrival_ns = Some(arrival_ns);
     }
 
     /// The learned frame period, ns.
     pub fn period_ns(&self) -> Option<u64> {
-        self.period_ns.map(|p| p as u64)
+        self.captures.period_ns()
     }
 
     /// When this camera's next frame is expected to be captured, ns.

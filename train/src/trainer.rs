@@ -167,18 +167,8 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         }
         None if opts.warm_start.is_some() => {
             let path = opts.warm_start.as_ref().expect("checked");
-            let source = fusepose_estimator::net::WeightFile::read(path)
-                .with_context(|| format!("reading the warm-start file {}", path.display()))?;
-            let cfg = crate::warm_start::config_for(&source.config, set.len());
-            let mut net = FusionNet::new(&cfg, &device);
-            let w = crate::warm_start::warm_start(&mut net, path, &device)?;
-            log.line(&format!(
-                "# warm start from {}: {} tensors copied, {} fresh ({})",
-                path.display(),
-                w.copied,
-                w.fresh.len(),
-                w.fresh.join(", ")
-            ));
+            let (net, cfg, w) = crate::warm_start::warm_start(path, set.len(), &device)?;
+            log.line(&w.log_line(path));
             (net, cfg, TrainRecord { seed: opts.seed, ..TrainRecord::default() })
         }
         None => {

@@ -23,18 +23,38 @@ pub struct WarmStart {
     pub fresh: Vec<String>,
 }
 
+impl WarmStart {
+    /// The training log's line for a warm start from `path`.
+    pub fn log_line(&self, path: &Path) -> String {
+        format!(
+            "# warm start from {}: {} tensors copied, {} fresh ({})",
+            path.display(),
+            self.copied,
+            self.fresh.len(),
+            self.fresh.join(", ")
+        )
+    }
+}
+
 /// The config a warm-started network for `num_classes` classes uses: the
 /// source file's architecture (points, crop, layer sizes) with the class count changed.
 pub fn config_for(source: &NetConfig, num_classes: usize) -> NetConfig {
     NetConfig { num_classes, ..source.clone() }
 }
 
-/// Copies every tensor of the pose-network file `path` whose name and shape
-/// match one of `net`'s.
-pub fn warm_start(net: &mut FusionNet, path: &Path, device: &Device) -> anyhow::Result<WarmStart> {
+/// A pose network for `num_classes` classes with the architecture of the
+/// file `path` (read once) and every tensor of it whose name and shape fit copied.
+pub fn warm_start(
+    path: &Path,
+    num_classes: usize,
+    device: &Device,
+) -> anyhow::Result<(FusionNet, NetConfig, WarmStart)> {
     let source =
         crate::store::load(path, device).with_context(|| format!("reading the warm-start file {}", path.display()))?;
-    copy_fitting(net, &source.net, path)
+    let cfg = config_for(&source.file.config, num_classes);
+    let mut net = FusionNet::new(&cfg, device);
+    let w = copy_fitting(&mut net, &source.net, path)?;
+    Ok((net, cfg, w))
 }
 
 /// Copies into `target` every tensor of `source` (read from `origin`) whose
@@ -82,7 +102,8 @@ mod tests {
         let five = config_for(&eight, 5);
         let mut net = FusionNet::new(&five, &device);
         let before = net.collect(None, None, false);
-        let w = warm_start(&mut net, &path, &device).unwrap();
+        let loaded = crate::store::load(&path, &device).unwrap();
+        let w = copy_fitting(&mut net, &loaded.net, &path).unwrap();
         let after = net.collect(None, None, false);
         let src: HashMap<String, Vec<u8>> = source
             .collect(None, None, false)

@@ -5,7 +5,7 @@ use std::time::{Duration, Instant};
 
 use fusepose_client::{CellConsumer, CellObject, CellPoseMessage, Ipc, monotonic_ns};
 
-use super::{object_name, rpy_from_quaternion};
+use super::{object_name, pose_text};
 
 fn text(msg: &CellPoseMessage) -> String {
     let mut out = format!(
@@ -16,18 +16,11 @@ fn text(msg: &CellPoseMessage) -> String {
         if msg.truncated != 0 { " (truncated)" } else { "" }
     );
     for o in msg.objects() {
-        let t = o.translation_m.map(|v| v * 1e3);
-        let rpy = rpy_from_quaternion(o.quaternion).map(f64::to_degrees);
         let cams: Vec<String> = o.views().iter().map(|v| format!("{:08x}", v.camera_id)).collect();
         out.push_str(&format!(
-            "\n  {:<16} xyz [{:>8.1} {:>8.1} {:>8.1}] mm  rpy [{:>7.1} {:>7.1} {:>7.1}] deg  conf {:.2}  views {} [{}]  spread {:.1} mm",
+            "\n  {:<16} {}  conf {:.2}  views {} [{}]  spread {:.1} mm",
             object_name(o.class_id),
-            t[0],
-            t[1],
-            t[2],
-            rpy[0],
-            rpy[1],
-            rpy[2],
+            pose_text(o.translation_m, o.quaternion),
             o.confidence,
             o.view_count,
             cams.join(" "),

@@ -538,11 +538,6 @@ impl NetEstimator {
         }
     }
 
-    /// Whether `other` shares this estimator's network engine (weights in memory).
-    pub fn shares_weights_with(&self, other: &NetEstimator) -> bool {
-        Arc::ptr_eq(&self.engine, &other.engine)
-    }
-
     /// The weight file (config, objects, training record).
     pub fn weights(&self) -> &WeightFile {
         &self.file

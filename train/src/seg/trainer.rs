@@ -167,7 +167,6 @@ fn recv(stream: &mut SegStream) -> anyhow::Result<SegSample> {
     }
 }
 
-/// Trains the segmenter, validates it through the engine and writes `cfg.out`.
 /// A segmenter for `num_classes` classes with the architecture of the one
 /// in `path` (a segmenter file or a pose-network file with one embedded) and
 /// every tensor of it whose name and shape fit copied
@@ -193,6 +192,7 @@ pub fn warm_start(
     Ok((net, arch, copied))
 }
 
+/// Trains the segmenter, validates it through the engine and writes `cfg.out`.
 pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     let set = cfg.objects.clone();
     if set.is_empty() {
@@ -249,13 +249,7 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         None if cfg.warm_start.is_some() => {
             let path = cfg.warm_start.as_ref().expect("checked");
             let (net, arch, w) = warm_start(path, set.len(), cfg.offsets, &device)?;
-            log.line(&format!(
-                "# warm start from {}: {} tensors copied, {} fresh ({})",
-                path.display(),
-                w.copied,
-                w.fresh.len(),
-                w.fresh.join(", ")
-            ));
+            log.line(&w.log_line(path));
             (net, arch, TrainRecord { seed: cfg.seed, ..TrainRecord::default() })
         }
         None => {
