@@ -136,6 +136,11 @@ pub struct Args {
     /// Metres per mesh-file unit for a mesh folder (0.001 for millimetre meshes).
     #[arg(long, alias = "mesh-scale", default_value_t = 1.0)]
     pub scale: f64,
+    /// Declare an object's symmetry for ADD(S), as `train --symmetry` (NAME=KIND or a bare
+    /// `suggested`). Objects still without one take the symmetry the network's weight
+    /// file was trained with.
+    #[arg(long = "symmetry", value_name = "NAME=KIND")]
+    pub symmetry: Vec<fusepose_scene::symmetry_spec::SymmetrySpec>,
     #[arg(long, help = crate::weights::WEIGHTS_HELP)]
     pub weights: Option<PathBuf>,
     /// Base seed of each frame's randomness, e.g. point sampling (frame i uses seed + i).
@@ -198,14 +203,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     cast::run_each(args, run_cast)
 }
 
+/// Applies `--symmetry`, then (for the network) the weight file's symmetries
+/// to objects that still declare none, so ADD(S) treats an object as training did.
+fn declare_symmetries(objects: &mut ObjectSet, args: &Args, net: bool) -> anyhow::Result<()> {
+    use fusepose_scene::symmetry_spec::{Describe, apply_symmetry_specs};
+    for (name, symmetry) in apply_symmetry_specs(objects, &args.symmetry)? {
+        tracing::info!("{name}: symmetry {} (--symmetry)", Describe(&symmetry));
+    }
+    if net {
+        let weights = crate::weights::resolve_weights(args.weights.as_deref())?;
+        let file = fusepose_estimator::net::WeightFile::read(&weights)
+            .with_context(|| format!("loading {}", weights.display()))?;
+        for name in file.adopt_symmetries(objects) {
+            tracing::info!("{name}: symmetry from {}", weights.display());
+        }
+    }
+    Ok(())
+}
+
 /// One evaluation under `args.cast[0]`; returns the summaries `--json` writes.
 fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Value>> {
     let mut data = EvalDataset::open(&args.dataset, &args.split)?;
     let source = args.objects.clone().or_else(|| data.object_source()).unwrap_or_else(|| "builtin".into());
-    let objects = fusepose_scene::mesh_io::load_object_set(&source, args.scale)
+    let mut objects = fusepose_scene::mesh_io::load_object_set(&source, args.scale)
         .with_context(|| format!("loading object set `{source}`"))?;
-    data.bind(&objects)?;
     let kinds = if args.compare.is_empty() { vec![args.estimator] } else { args.compare.clone() };
+    declare_symmetries(&mut objects, &args, kinds.contains(&EstimatorKind::Net))?;
+    data.bind(&objects)?;
     let mut mask_sources = args.masks.clone();
     mask_sources.dedup();
     let mut runners = kinds

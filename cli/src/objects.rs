@@ -5,9 +5,10 @@ use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use fusepose_scene::export::export_objects;
-use fusepose_scene::mesh_io::checks::{MissingTextures, suggest_symmetry};
+use fusepose_scene::mesh_io::checks::{MissingTextures, SymmetrySuggestion, suggest_symmetry};
 use fusepose_scene::mesh_io::load_object_dir_checked;
-use fusepose_scene::{ObjectSet, Symmetry, builtin::builtin_objects};
+use fusepose_scene::symmetry_spec::{Describe, SymmetrySpec, apply_symmetry_specs};
+use fusepose_scene::{ObjectSet, builtin::builtin_objects};
 
 #[derive(clap::Args)]
 pub struct Args {
@@ -26,6 +27,9 @@ enum Command {
         /// Metres per mesh-file unit (0.001 for millimetre models); not applied to `builtin`
         #[arg(long, default_value_t = 1.0)]
         scale: f64,
+        /// Show the listing with these symmetries declared (as `train --symmetry` would)
+        #[arg(long = "symmetry", value_name = "NAME=KIND")]
+        symmetry: Vec<SymmetrySpec>,
     },
     /// Write the built-in set to DIR: DIR/NAME/NAME.{obj,mtl,png} (metres) and DIR/models_info.json.
     Export {
@@ -36,7 +40,7 @@ enum Command {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
-        Command::List { objects, scale } => print_listing(&objects, scale),
+        Command::List { objects, scale, symmetry } => print_listing(&objects, scale, &symmetry),
         Command::Export { dir } => {
             let set = builtin_objects();
             let info = export_objects(&set, &dir).with_context(|| format!("exporting to {}", dir.display()))?;
@@ -46,50 +50,48 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 }
 
-/// Prints the listing of `objects` (see `List`) and any mesh-check warnings;
-/// `train --stage all` prints it before training, so a wrong unit or a
-/// symmetry to declare shows before the hour is spent.
-pub fn print_listing(objects: &str, scale: f64) -> anyhow::Result<()> {
-    let (set, warnings) = if objects == "builtin" {
+/// Prints the listing of `objects` (see `List`) with the `--symmetry`
+/// declarations applied, and any mesh-check warnings; `train --stage all`
+/// prints it before training, so a wrong unit or a symmetry to declare shows
+/// before the hour is spent.
+pub fn print_listing(objects: &str, scale: f64, symmetry: &[SymmetrySpec]) -> anyhow::Result<()> {
+    let (mut set, warnings) = if objects == "builtin" {
         (builtin_objects(), Vec::new())
     } else {
         load_object_dir_checked(Path::new(objects), scale, MissingTextures::Warn)
             .with_context(|| format!("loading object set '{objects}'"))?
     };
-    print!("{}", table(&set));
+    apply_symmetry_specs(&mut set, symmetry)?;
+    let suggested: Vec<SymmetrySuggestion> = set.objects.iter().map(suggest_symmetry).collect();
+    print!("{}", table(&set, &suggested));
+    let undeclared = set.objects.iter().zip(&suggested);
+    let undeclared = undeclared.filter(|(o, s)| !o.symmetry.is_symmetric() && **s != SymmetrySuggestion::None);
+    let undeclared: Vec<&str> = undeclared.map(|(o, _)| o.name.as_str()).collect();
+    if !undeclared.is_empty() {
+        println!(
+            "note: the geometry of {} suggests a symmetry that is not declared (training, ADD(S) and the weight file use the declared one): \
+             declare it with --symmetry NAME=KIND (none, continuous:x|y|z, N-fold:x|y|z, box, suggested) or --symmetry suggested, \
+             unless a texture breaks it",
+            undeclared.join(", ")
+        );
+    }
     for w in &warnings {
         println!("warning: {w}");
     }
     Ok(())
 }
 
-fn describe(symmetry: &Symmetry) -> String {
-    match symmetry {
-        Symmetry::None => "none".into(),
-        Symmetry::Discrete(t) => format!("discrete ({} + identity)", t.len()),
-        Symmetry::Continuous { axis, origin } => format!(
-            "continuous about ({:.2}, {:.2}, {:.2}) through ({:.1}, {:.1}, {:.1}) mm",
-            axis.x,
-            axis.y,
-            axis.z,
-            origin.x * 1e3,
-            origin.y * 1e3,
-            origin.z * 1e3
-        ),
-    }
-}
-
 /// The listing: one line per object, class id first; the last column is a
 /// suggestion computed from the shape only (a texture may break it), never applied.
-fn table(set: &ObjectSet) -> String {
+fn table(set: &ObjectSet, suggested: &[SymmetrySuggestion]) -> String {
     let width = set.objects.iter().map(|o| o.name.len()).max().unwrap_or(4).max(4);
-    let declared: Vec<String> = set.objects.iter().map(|o| describe(&o.symmetry)).collect();
+    let declared: Vec<String> = set.objects.iter().map(|o| Describe(&o.symmetry).to_string()).collect();
     let sym_width = declared.iter().map(|d| d.len()).max().unwrap_or(8).max(8);
     let mut out = format!(
         "{:>5}  {:<width$}  {:>9}  {:>13}  {:<sym_width$}  suggested from geometry\n",
         "class", "name", "triangles", "diameter (mm)", "symmetry"
     );
-    for (i, (o, declared)) in set.objects.iter().zip(&declared).enumerate() {
+    for (i, ((o, declared), suggested)) in set.objects.iter().zip(&declared).zip(suggested).enumerate() {
         out += &format!(
             "{:>5}  {:<width$}  {:>9}  {:>13.1}  {:<sym_width$}  {}\n",
             i + 1,
@@ -97,7 +99,7 @@ fn table(set: &ObjectSet) -> String {
             o.mesh.triangles.len(),
             o.diameter * 1e3,
             declared,
-            suggest_symmetry(o)
+            suggested
         );
     }
     out
@@ -110,7 +112,8 @@ mod tests {
     #[test]
     fn builtin_listing_names_every_object_with_its_diameter() {
         let set = builtin_objects();
-        let text = table(&set);
+        let suggested: Vec<_> = set.objects.iter().map(suggest_symmetry).collect();
+        let text = table(&set, &suggested);
         assert_eq!(text.lines().count(), set.len() + 1);
         let cracker = text.lines().find(|l| l.contains("cracker_box")).unwrap();
         assert!(

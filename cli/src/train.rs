@@ -14,6 +14,7 @@ use anyhow::Context;
 use fusepose_scene::mesh_io::load_object_set;
 use fusepose_scene::render::{DepthSensor, Randomize};
 use fusepose_scene::sampler::SamplerConfig;
+use fusepose_scene::symmetry_spec::{Describe, SymmetrySpec, apply_symmetry_specs};
 use fusepose_train::data::Source;
 use fusepose_train::trainer::{Stage, TrainOptions, train, validate_file};
 
@@ -40,6 +41,14 @@ pub struct Args {
     /// Metres per mesh-file unit (not applied to `builtin`).
     #[arg(long, alias = "mesh-scale", default_value_t = 1.0)]
     pub scale: f64,
+    /// Declare an object's symmetry, repeatable: NAME=none | continuous:x|y|z |
+    /// N-fold:x|y|z (N 2..12) | box | suggested, axes of the mesh file through the
+    /// centroid of its surface; or a bare `suggested` for every object's geometric
+    /// suggestion (the listing shows them). Used by the training loss and ADD(S),
+    /// and stored in the weight file, which gives it to a mesh folder loaded without
+    /// a models_info.json (daemon, eval).
+    #[arg(long = "symmetry", value_name = "NAME=KIND")]
+    pub symmetry: Vec<SymmetrySpec>,
     /// Train on a BOP dataset — its root (the --split folder is used) or a split
     /// folder (e.g. `data/out` or `data/out/train`; obj_ids = class ids) —
     /// instead of rendering: frames with index % 10 != 0 train, the others validate.
@@ -191,8 +200,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.objects
         );
     }
-    let set =
-        load_object_set(&args.objects, args.scale).with_context(|| format!("loading object set '{}'", args.objects))?;
+    let set = training_objects(&args)?;
     let stage = match args.stage() {
         StageArg::Pose => Stage::Pose,
         StageArg::Refine => Stage::Refine,
@@ -274,6 +282,24 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     println!("{}", fusepose_train::validate::summary(&summary.validation));
     Ok(())
+}
+
+/// The object set of `--objects` with its `--symmetry` declarations; objects
+/// still without one take the symmetry the `--resume` file was trained with.
+fn training_objects(args: &Args) -> anyhow::Result<fusepose_scene::ObjectSet> {
+    let mut set =
+        load_object_set(&args.objects, args.scale).with_context(|| format!("loading object set '{}'", args.objects))?;
+    for (name, symmetry) in apply_symmetry_specs(&mut set, &args.symmetry)? {
+        tracing::info!("{name}: symmetry {} (--symmetry)", Describe(&symmetry));
+    }
+    if let Some(resume) = &args.resume {
+        if let Ok(file) = fusepose_estimator::net::WeightFile::read(resume) {
+            for name in fusepose_estimator::net::meta::adopt_symmetries(&file.objects, &mut set) {
+                tracing::info!("{name}: symmetry from {}", resume.display());
+            }
+        }
+    }
+    Ok(set)
 }
 
 /// `--bench-engine`: ms per object and GFLOP/s for 1/2 threads and 1/5 objects per frame.

@@ -6,7 +6,7 @@
 use std::sync::{Arc, Mutex};
 
 use fusepose_client::{STAGE_COUNT, Stage};
-use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions};
+use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
 use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile};
 use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{
@@ -49,14 +49,25 @@ pub struct EngineSpec {
     pub shared_segmenter: std::sync::OnceLock<Arc<Mutex<SegEngine>>>,
 }
 
-/// The object set named by `estimator.objects`.
+/// The object set named by `estimator.objects`. A mesh folder's objects that
+/// declare no symmetry take the one `estimator.weights` was trained with
+/// (e.g. `fusepose train --symmetry`), so the weight check sees the same set.
 pub fn load_objects(config: &EstimatorConfig) -> anyhow::Result<ObjectSet> {
     if config.objects == "builtin" {
         return Ok(fusepose_scene::builtin::builtin_objects());
     }
     let dir = std::path::Path::new(&config.objects);
-    fusepose_scene::mesh_io::load_object_dir(dir, config.objects_scale)
-        .map_err(|e| anyhow::anyhow!("estimator.objects = {:?}: {e}", config.objects))
+    let mut set = fusepose_scene::mesh_io::load_object_dir(dir, config.objects_scale)
+        .map_err(|e| anyhow::anyhow!("estimator.objects = {:?}: {e}", config.objects))?;
+    // An unreadable file is reported where the network is loaded.
+    if config.kind == EstimatorKind::Net {
+        if let Ok(file) = WeightFile::read(&config.weights) {
+            for name in file.adopt_symmetries(&mut set) {
+                tracing::debug!(object = %name, weights = %config.weights.display(), "symmetry from the weight file");
+            }
+        }
+    }
+    Ok(set)
 }
 
 /// Points and crop side without a network to take them from (ICP, transport only).

@@ -29,4 +29,5 @@ pub mod overlay;
 pub mod render;
 pub mod sampler;
 pub mod surface;
+pub mod symmetry_spec;
 pub mod ycbv;

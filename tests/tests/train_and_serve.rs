@@ -4,7 +4,8 @@
 //! seconds (the whole pipeline by default, warm-started from the shipped trunk), its
 //! acceptance report, and a separate `fuseposed` started with exactly the
 //! `fuseposed.toml` lines the report prints, answering an unlabelled frame of
-//! those objects (so its own segmenter runs) with an OK pose message.
+//! those objects (so its own segmenter runs) with an OK pose message. The
+//! objects' `--symmetry` declarations reach the daemon through the weight file.
 
 use std::path::Path;
 use std::process::Command;
@@ -91,11 +92,17 @@ fn one_command_trains_a_new_object_set_and_the_daemon_serves_it() -> anyhow::Res
     // No --stage: a fresh run on a mesh folder is the whole pipeline, warm-started from the shipped trunk.
     cmd.args(["--minutes", "0.25", "--batch", "2", "--val-frames", "3", "--val-samples", "6"]);
     cmd.args(["--quiet", "--checkpoint-dir"]).arg(dir.path().join("work")).arg("--out").arg(&out);
+    // Declared symmetries travel in the weight file: the folder has no models_info.json,
+    // so the daemon below only passes its weight check if it takes them from there.
+    cmd.args(["--symmetry", "hex_can=6-fold:z", "--symmetry", "tea_box=box"]);
     let run = cmd.output()?;
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(run.status.success(), "train failed:\n{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
     assert!(stdout.contains("warm start from"), "no warm start:\n{stdout}");
     assert!(stdout.contains("tea_box") && stdout.contains("suggested from geometry"), "no mesh listing:\n{stdout}");
+    let listed = |name: &str| stdout.lines().find(|l| l.contains(name)).unwrap_or_default().to_owned();
+    assert!(listed("hex_can").contains("discrete (5 + identity)"), "{}", listed("hex_can"));
+    assert!(listed("tea_box").contains("discrete (3 + identity)"), "{}", listed("tea_box"));
     for stage in ["stage 1/4", "stage 2/4", "stage 3/4", "stage 4/4"] {
         assert!(stdout.contains(stage), "{stage} missing from:\n{stdout}");
     }

@@ -21,7 +21,13 @@ fn close(name: &str, engine: &[f32], burn: &[f32]) {
 
 fn entries(k: usize) -> Vec<ObjectEntry> {
     (0..k)
-        .map(|i| ObjectEntry { name: format!("o{i}"), symmetry: "none".into(), diameter: 0.1, hash: "0".into() })
+        .map(|i| ObjectEntry {
+            name: format!("o{i}"),
+            symmetry: "none".into(),
+            diameter: 0.1,
+            hash: "0".into(),
+            symmetries: None,
+        })
         .collect()
 }
 

@@ -73,7 +73,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         work.dir.display()
     );
 
-    crate::objects::print_listing(&args.objects, args.scale)?;
+    crate::objects::print_listing(&args.objects, args.scale, &args.symmetry)?;
 
     // 1. Pose net + refiner, from the warm-start trunk or the --resume file when given.
     if work.pose().exists() {

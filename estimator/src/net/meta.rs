@@ -5,6 +5,7 @@
 //! All values are strings (safetensors metadata is a string → string map);
 //! structured values are JSON.
 
+use fusepose_scene::bop::BopSymmetry;
 use fusepose_scene::{ObjectModel, ObjectSet, Symmetry};
 use serde::{Deserialize, Serialize};
 
@@ -29,6 +30,12 @@ pub struct ObjectEntry {
     pub diameter: f64,
     /// FNV-1a 64 over mesh positions, triangles and sample points (hex).
     pub hash: String,
+    /// The symmetry itself, in BOP `models_info.json` form (mm), for symmetric
+    /// objects (absent in files written before it was stored), so that a mesh
+    /// folder without a `models_info.json` gets the symmetry it was trained
+    /// with ([`adopt_symmetries`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub symmetries: Option<BopSymmetry>,
 }
 
 impl ObjectEntry {
@@ -38,6 +45,7 @@ impl ObjectEntry {
             symmetry: symmetry_tag(&model.symmetry),
             diameter: model.diameter,
             hash: format!("{:016x}", object_hash(model)),
+            symmetries: model.symmetry.is_symmetric().then(|| BopSymmetry::of(&model.symmetry)),
         }
     }
 }
@@ -45,6 +53,28 @@ impl ObjectEntry {
 /// The object list of an object set, in class order.
 pub fn object_entries(set: &ObjectSet) -> Vec<ObjectEntry> {
     set.objects.iter().map(ObjectEntry::of).collect()
+}
+
+/// Gives each object of `set` that declares no symmetry the one its entry in
+/// `entries` (a weight file's object list, same class order) was trained
+/// with — e.g. from `fusepose train --symmetry` on a folder of bare meshes.
+/// Objects are matched by position and name; a declared symmetry is never
+/// replaced (the weight check then reports any disagreement). Returns the
+/// names of the objects that took one.
+pub fn adopt_symmetries(entries: &[ObjectEntry], set: &mut ObjectSet) -> Vec<String> {
+    let mut adopted = Vec::new();
+    for (entry, object) in entries.iter().zip(&mut set.objects) {
+        if entry.name != object.name || object.symmetry.is_symmetric() {
+            continue;
+        }
+        if let Some(symmetry) = entry.symmetries.as_ref().and_then(|s| s.to_symmetry().ok()) {
+            if symmetry.is_symmetric() {
+                object.symmetry = symmetry;
+                adopted.push(object.name.clone());
+            }
+        }
+    }
+    adopted
 }
 
 /// How training went; informative only (never checked at load).
@@ -120,5 +150,44 @@ mod tests {
         assert_eq!(object_hash(&model(0.01)), object_hash(&model(0.01)));
         assert_ne!(object_hash(&model(0.01)), object_hash(&model(0.02)));
         assert_eq!(ObjectEntry::of(&model(0.0)).symmetry, "none");
+    }
+
+    /// A mesh folder without a models_info.json loads every object without
+    /// symmetry; the weight file's list gives back what training used.
+    #[test]
+    fn symmetries_travel_in_the_object_list_and_are_adopted() {
+        let trained = fusepose_scene::builtin::builtin_objects();
+        let json = serde_json::to_string(&object_entries(&trained)).unwrap();
+        let entries: Vec<ObjectEntry> = serde_json::from_str(&json).unwrap();
+        assert_eq!(entries, object_entries(&trained));
+        let mut bare = trained.clone();
+        for o in &mut bare.objects {
+            o.symmetry = Symmetry::None;
+        }
+        let adopted = adopt_symmetries(&entries, &mut bare);
+        let symmetric: Vec<String> =
+            trained.objects.iter().filter(|o| o.symmetry.is_symmetric()).map(|o| o.name.clone()).collect();
+        assert!(!symmetric.is_empty());
+        assert_eq!(adopted, symmetric);
+        for (a, b) in trained.objects.iter().zip(&bare.objects) {
+            assert_eq!(symmetry_tag(&a.symmetry), symmetry_tag(&b.symmetry), "{}", a.name);
+            for (x, y) in a.symmetry.sampled(4).iter().zip(b.symmetry.sampled(4).iter()) {
+                let d = (x.to_homogeneous() - y.to_homogeneous()).abs().max();
+                assert!(d < 1e-9, "{}: {d}", a.name);
+            }
+        }
+        // A declared symmetry is kept, and a list from before symmetries were stored adopts nothing.
+        let mut old = entries.clone();
+        for e in &mut old {
+            e.symmetries = None;
+        }
+        let old: Vec<ObjectEntry> =
+            serde_json::from_str(&serde_json::to_string(&old).unwrap().replace(",\"symmetries\":null", "")).unwrap();
+        let mut bare2 = bare.clone();
+        for o in &mut bare2.objects {
+            o.symmetry = Symmetry::None;
+        }
+        assert!(adopt_symmetries(&old, &mut bare2).is_empty());
+        assert!(adopt_symmetries(&entries, &mut bare).is_empty());
     }
 }

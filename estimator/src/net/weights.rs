@@ -96,6 +96,13 @@ impl WeightFile {
         Ok(Self { config, objects, train, metadata, tensors })
     }
 
+    /// Gives the objects of `set` that declare no symmetry the one this file
+    /// was trained with ([`crate::net::meta::adopt_symmetries`]); returns their names.
+    /// Call before [`WeightFile::check_objects`] on a set loaded from a bare mesh folder.
+    pub fn adopt_symmetries(&self, set: &mut ObjectSet) -> Vec<String> {
+        crate::net::meta::adopt_symmetries(&self.objects, set)
+    }
+
     /// Checks that the file was trained for exactly this object set (names, symmetries,
     /// diameters and mesh/sample hashes, in class order).
     pub fn check_objects(&self, set: &ObjectSet) -> Result<(), NetLoadError> {

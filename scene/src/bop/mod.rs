@@ -30,7 +30,7 @@ mod writer;
 
 pub use error::BopError;
 pub use manifest::{ClassEntry, DatasetManifest, MANIFEST_FILE, ObjectSource};
-pub use models_info::{BopModelInfo, read_models_info};
+pub use models_info::{BopModelInfo, BopSymmetry, read_models_info};
 pub use reader::{BopDataset, BopFrame, BopGt, FrameId};
 pub use writer::{BopWriter, FrameToWrite, InstanceToWrite};
 

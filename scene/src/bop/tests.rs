@@ -260,6 +260,13 @@ fn models_info_is_in_millimetres_and_reads_back() {
             assert_eq!(v.len(), 1);
             assert!((v[0].translation.vector - Vector3::new(0.0, 0.0, 0.002)).norm() < 1e-12);
             assert!((v[0].rotation.angle() - std::f64::consts::PI).abs() < 1e-9);
+            let back = v[0].to_homogeneous();
+            assert!(
+                (0..16)
+                    .all(|k| (back[(k / 4, k % 4)] * if k % 4 == 3 && k < 12 { 1e3 } else { 1.0 } - expected[k]).abs()
+                        < 1e-9),
+                "{back}"
+            );
         }
         s => panic!("expected discrete, got {s:?}"),
     }

@@ -208,7 +208,8 @@ pub fn check_unique_names(found: &[(String, PathBuf)]) -> Result<(), CheckError>
     Ok(())
 }
 
-/// A symmetry the geometry suggests (never applied by itself).
+/// A symmetry the geometry suggests (applied only when asked:
+/// [`crate::symmetry_spec`]). Axes pass through the centroid of the surface samples.
 #[derive(Clone, Debug, PartialEq)]
 pub enum SymmetrySuggestion {
     None,
@@ -221,8 +222,10 @@ pub enum SymmetrySuggestion {
         axis: Vector3<f64>,
         order: u32,
     },
-    /// Near-invariant under half-turns about each of the three principal axes.
-    Box,
+    /// Near-invariant under half-turns about each of three orthogonal axes.
+    Box {
+        axes: [Vector3<f64>; 3],
+    },
 }
 
 impl std::fmt::Display for SymmetrySuggestion {
@@ -232,7 +235,7 @@ impl std::fmt::Display for SymmetrySuggestion {
             SymmetrySuggestion::None => write!(f, "none"),
             SymmetrySuggestion::Continuous { axis: a } => write!(f, "continuous about {}", axis(a)),
             SymmetrySuggestion::Discrete { axis: a, order } => write!(f, "{order}-fold about {}", axis(a)),
-            SymmetrySuggestion::Box => write!(f, "box (half-turns about the 3 principal axes)"),
+            SymmetrySuggestion::Box { .. } => write!(f, "box (half-turns about 3 orthogonal axes)"),
         }
     }
 }
@@ -304,7 +307,7 @@ pub fn suggest_symmetry(object: &ObjectModel) -> SymmetrySuggestion {
             }
         }
         if half_turns == 3 && best_order == 2 {
-            return SymmetrySuggestion::Box;
+            return SymmetrySuggestion::Box { axes: family };
         }
     }
     best
