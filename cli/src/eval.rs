@@ -121,6 +121,10 @@ pub struct Args {
     /// of their class) become background (default: the engine's, 1).
     #[arg(long)]
     pub seg_min_interior: Option<usize>,
+    /// `--masks net` with the offset head: the instance vote's peak search,
+    /// MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS (default: the engine's).
+    #[arg(long)]
+    pub seg_voting: Option<fusepose_estimator::seg::voting::VotingParams>,
     /// `--masks net`: how cell labels become frame labels: `cells`,
     /// `erode-cells` or `refine:N` (pixel borders from interpolated logits, N
     /// pixels eroded); default: the engine's.
@@ -167,6 +171,12 @@ pub struct Args {
     /// as the daemon's `estimator.join_parts`.
     #[arg(long, default_value_t = 1.0)]
     pub join_parts: f32,
+    /// One object, not two: segmenter instances of a class whose centres are
+    /// within FACTOR × the object's smallest side become one, and a pose that
+    /// close to a better pose of its class is dropped (0 = off), as the
+    /// daemon's `estimator.duplicates`.
+    #[arg(long, default_value_t = 0.0)]
+    pub duplicates: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -251,9 +261,13 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
                 args.seg_max_elongation,
                 args.seg_boundary,
                 args.seg_min_interior,
+                args.seg_voting,
             )?)
         }
     };
+    if let Some(m) = net_masks.as_mut() {
+        m.set_instance_separation(fusepose_estimator::duplicates::separations(&objects, args.duplicates));
+    }
     let metrics = objects
         .objects
         .iter()
@@ -374,6 +388,12 @@ struct Runner {
     /// and what it judged: (ghost poses failing, matched poses failing,
     /// matched poses under 2 cm ADD-S failing, poses checked).
     verifier: Option<Verifier>,
+    /// Rank of each pose for duplicate suppression (verification fit, else confidence).
+    scores: Vec<f32>,
+    /// Per-class minimum centre distance of two poses (`--duplicates`).
+    separations: Vec<f32>,
+    /// Poses dropped as duplicates.
+    duplicates: usize,
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -455,6 +475,9 @@ impl Runner {
                 )
             }),
             verify_drop: args.verify == "drop",
+            scores: Vec::new(),
+            separations: fusepose_estimator::duplicates::separations(objects, args.duplicates),
+            duplicates: 0,
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -495,6 +518,7 @@ impl Runner {
         }
         if estimated.is_ok() {
             self.verify(&view, frame, metrics);
+            self.suppress_duplicates();
         }
         if let Err(e) = estimated {
             let reason = match &e {
@@ -603,10 +627,26 @@ impl Runner {
                 }
             }
         }
+        self.scores.clear();
+        self.scores.extend(verdicts.iter().map(|v| v.map_or(f32::NAN, |v| v.fit)));
         if self.verify_drop {
             let mut it = passed.iter();
             self.poses.retain(|_| it.next().copied().unwrap_or(false));
+            let mut it = passed.iter();
+            self.scores.retain(|_| it.next().copied().unwrap_or(false));
         }
+    }
+
+    /// Drops duplicate poses ([`fusepose_estimator::duplicates`]), ranked by
+    /// the verification fit when verifying, else by confidence.
+    fn suppress_duplicates(&mut self) {
+        if self.verifier.is_none() {
+            self.scores.clear();
+            self.scores.extend(self.poses.as_slice().iter().map(|p| p.confidence));
+        }
+        let mut dropped = Vec::new();
+        self.duplicates +=
+            fusepose_estimator::duplicates::suppress(&mut self.poses, &self.separations, &self.scores, &mut dropped);
     }
 
     fn print(&self, dataset: &str, frames: usize) {
@@ -632,6 +672,7 @@ impl Runner {
         }
         if self.joined > 0 {
             println!("regions joined as pieces of one object: {}", self.joined);
+            println!("poses dropped as duplicates: {}", self.duplicates);
         }
         if self.instance_counts.truth > 0 {
             println!("{}", self.instance_counts.summary());
@@ -670,6 +711,7 @@ impl Runner {
             o.insert("frames_refused".into(), self.refused.values().sum::<usize>().into());
             o.insert("unmatched_estimates".into(), self.unmatched.into());
             o.insert("joined_parts".into(), self.joined.into());
+            o.insert("duplicates_dropped".into(), self.duplicates.into());
             if self.instance_counts.truth > 0 {
                 o.insert("instances".into(), self.instance_counts.json());
             }

@@ -195,6 +195,11 @@ pub struct EstimatorConfig {
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
     pub join_parts: f32,
+    /// One object, not two: segmenter instances of a class whose 3D centres
+    /// lie within this factor × the object's smallest side become one, and a
+    /// pose that close to a better-fitting pose of its class is dropped
+    /// (`fusepose_estimator::duplicates`). 0 = off.
+    pub duplicates: f32,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -299,6 +304,7 @@ impl Default for EstimatorConfig {
             verify_min_fit: fusepose_estimator::verify::VerifyConfig::default().min_fit,
             verify_min_inliers: fusepose_estimator::verify::VerifyConfig::default().min_inlier_fraction,
             join_parts: 1.0,
+            duplicates: 0.0,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
@@ -497,6 +503,9 @@ impl DaemonConfig {
         if !(e.join_parts.is_finite() && (0.0..=4.0).contains(&e.join_parts)) {
             return Err(invalid("estimator.join_parts", e.join_parts, "must be in 0..=4 (0 = off)"));
         }
+        if !(e.duplicates.is_finite() && (0.0..=2.0).contains(&e.duplicates)) {
+            return Err(invalid("estimator.duplicates", e.duplicates, "must be in 0..=2 (0 = off)"));
+        }
         if e.seg_boundary.parse::<fusepose_estimator::seg::Boundary>().is_err() {
             return Err(invalid(
                 "estimator.seg_boundary",
@@ -622,6 +631,9 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\njoin_parts = -1.0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.join_parts"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\njoin_parts = 0\n").unwrap().estimator.join_parts, 0.0);
+        let err = DaemonConfig::parse("[estimator]\nduplicates = 3\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.duplicates") && err.contains("0..=2"), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\nduplicates = 0.5\n").unwrap().estimator.duplicates, 0.5);
         let err = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_boundary"), "{err}");
         let c = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode-cells\"\n").unwrap();

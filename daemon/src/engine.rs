@@ -40,6 +40,9 @@ pub struct EngineSpec {
     /// many metres of each other are one instance (`estimator.join_parts`);
     /// empty = never join.
     pub part_extents: Vec<f32>,
+    /// Per-class distance under which two instances or poses are one object
+    /// (`estimator.duplicates`); empty = off.
+    pub separations: Vec<f32>,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
     /// The network's and segmenter's cost measured at start (network only).
@@ -130,6 +133,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
         }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
+        spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
         spec.segmenter = segmenter(config, &objects)?;
         // Checked by the config's validation; a bad value there is an error, not this default.
         spec.seg_boundary =
@@ -165,6 +169,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
+            separations: Vec::new(),
             seg_boundary: Boundary::default(),
             startup_cost: None,
             shared_segmenter: Default::default(),
@@ -181,6 +186,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
+            separations: Vec::new(),
             seg_boundary: Boundary::default(),
             startup_cost: None,
             shared_segmenter: Default::default(),
@@ -263,6 +269,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         min_confidence: 0.0,
         verify: None,
         part_extents: Vec::new(),
+        separations: Vec::new(),
         seg_boundary: Boundary::default(),
         startup_cost,
         shared_segmenter: Default::default(),
@@ -302,6 +309,10 @@ pub struct PoseEngine {
     /// Checks each pose against the depth image; with `verify_drop` failing poses are dropped.
     verifier: Option<Verifier>,
     verify_drop: bool,
+    /// `estimator.duplicates` per class (empty = off), and scratch for [`drop_duplicates`].
+    separations: Vec<f32>,
+    scores: Vec<f32>,
+    duplicate_marks: Vec<bool>,
     /// The verification of each pose in `poses` (same order), when verifying.
     verdicts: Vec<Verification>,
     /// Poses dropped by verification in the last frame.
@@ -343,6 +354,32 @@ fn verify_poses(
     failed
 }
 
+/// Drops poses that duplicate a better-fitting pose of their class
+/// (`fusepose_estimator::duplicates`), ranked by the verification fit when
+/// verifying (keeping `verdicts` in step), else by confidence. No allocation.
+fn drop_duplicates(
+    poses: &mut PoseSet,
+    verdicts: &mut Vec<Verification>,
+    separations: &[f32],
+    scores: &mut Vec<f32>,
+    marks: &mut Vec<bool>,
+) {
+    if separations.is_empty() || poses.len() < 2 {
+        return;
+    }
+    scores.clear();
+    if verdicts.len() == poses.len() {
+        scores.extend(verdicts.iter().map(|v| v.fit));
+    } else {
+        scores.extend(poses.as_slice().iter().map(|p| p.confidence));
+    }
+    let dropped = fusepose_estimator::duplicates::suppress(poses, separations, scores, marks);
+    if dropped > 0 && !verdicts.is_empty() {
+        let mut it = marks.iter();
+        verdicts.retain(|_| !it.next().copied().unwrap_or(false));
+    }
+}
+
 /// Stage durations of one frame, ns (0 = stage not run).
 pub type StageTimes = [u64; STAGE_COUNT];
 
@@ -370,6 +407,7 @@ impl PoseEngine {
                 None => {
                     let mut seg = SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?;
                     seg.set_boundary(spec.seg_boundary);
+                    seg.set_instance_separation(spec.separations.clone());
                     spec.shared_segmenter.get_or_init(|| Arc::new(Mutex::new(seg))).clone()
                 }
             }),
@@ -388,6 +426,9 @@ impl PoseEngine {
             verifier: spec.verify.as_ref().map(|(objects, cfg, _)| Verifier::new(objects, *cfg)),
             verify_drop: spec.verify.as_ref().is_some_and(|v| v.2),
             verdicts: Vec::with_capacity(max_instances),
+            separations: spec.separations.clone(),
+            scores: Vec::with_capacity(max_instances),
+            duplicate_marks: Vec::with_capacity(max_instances),
             rejected: 0,
             failed_verification: 0,
             post_estimate_ns: 0.0,
@@ -414,6 +455,9 @@ impl PoseEngine {
             verifier: None,
             verify_drop: false,
             verdicts: Vec::new(),
+            separations: Vec::new(),
+            scores: Vec::new(),
+            duplicate_marks: Vec::new(),
             rejected: 0,
             failed_verification: 0,
             post_estimate_ns: 0.0,
@@ -478,6 +522,14 @@ impl PoseEngine {
                     frame,
                 );
                 self.rejected = if self.verify_drop { self.failed_verification } else { 0 };
+                // Counted by `fusepose eval`; the stats message has no field for it.
+                drop_duplicates(
+                    &mut self.poses,
+                    &mut self.verdicts,
+                    &self.separations,
+                    &mut self.scores,
+                    &mut self.duplicate_marks,
+                );
                 // Slow decay: a frame with many objects verifies longest, and
                 // the next such frame must not be planned without its cost.
                 let post = (fusepose_client::monotonic_ns() - t2) as f64;

@@ -10,6 +10,7 @@
 //! models and intrinsics; never on the daemon, client or trainer.
 
 pub mod cpu_pin;
+pub mod duplicates;
 pub mod frame;
 pub mod icp;
 pub mod instances;

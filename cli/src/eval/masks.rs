@@ -6,6 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
+use fusepose_estimator::seg::voting::VotingParams;
 use fusepose_estimator::seg::{Boundary, SegEngine};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
 use fusepose_scene::ObjectSet;
@@ -30,6 +31,11 @@ pub struct NetMasks {
 }
 
 impl NetMasks {
+    /// See `SegEngine::set_instance_separation`.
+    pub fn set_instance_separation(&mut self, separation: Vec<f32>) {
+        self.engine.set_instance_separation(separation);
+    }
+
     /// Loads the segmenter of `weights` (a network file with one embedded, or a segmenter file).
     /// `min_cells`: see `SegEngine::set_min_component_cells` (`None`: the engine's default).
     pub fn load(
@@ -39,6 +45,7 @@ impl NetMasks {
         max_elongation: Option<f32>,
         boundary: Option<Boundary>,
         min_interior: Option<usize>,
+        voting: Option<VotingParams>,
     ) -> anyhow::Result<Self> {
         let mut engine = SegEngine::load(weights, objects)
             .with_context(|| format!("--masks net: loading the segmenter of {}", weights.display()))?;
@@ -53,6 +60,9 @@ impl NetMasks {
         }
         if let Some(b) = boundary {
             engine.set_boundary(b);
+        }
+        if let Some(v) = voting {
+            engine.set_voting(v);
         }
         Ok(Self {
             engine,

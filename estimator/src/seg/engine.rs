@@ -16,6 +16,7 @@ use super::boundary::{Boundary, BoundaryScratch, refine};
 use super::config::{INPUT_CHANNELS, SegConfig};
 use super::file::SegFile;
 use super::input::FrameMap;
+use super::merge::InstanceMerger;
 use super::voting::{Voting, VotingParams};
 use crate::frame::{FrameError, FrameView, LabelPlane};
 use crate::net::NetLoadError;
@@ -201,6 +202,9 @@ pub struct SegEngine {
     /// Instance id → class id of the last [`SegEngine::segment_instances`] (index 0 = background).
     instance_classes: Vec<u16>,
     voting: Voting,
+    /// Per-class distance under which two instances are one object (metres; empty = off).
+    separation: Vec<f32>,
+    merger: InstanceMerger,
     cols: Vec<f32>,
     cells: Vec<u16>,
     min_component_cells: usize,
@@ -269,6 +273,8 @@ impl SegEngine {
             cell_ids: vec![0; hw(1)],
             instance_classes: Vec::with_capacity(hw(1) + 1),
             voting: Voting::new(s[1].1, s[1].0, VotingParams::default()),
+            separation: Vec::new(),
+            merger: InstanceMerger::default(),
             cols: vec![0.0; cols],
             cells: vec![0; hw(1)],
             min_component_cells: MIN_COMPONENT_CELLS,
@@ -312,6 +318,13 @@ impl SegEngine {
     /// separates touching objects of one class.
     pub fn separates_instances(&self) -> bool {
         self.config.offsets
+    }
+
+    /// Instances of one class whose 3D centres are closer than
+    /// `separation[class − 1]` metres become one ([`super::merge`]); e.g.
+    /// [`crate::duplicates::separations`]. Empty (the default) = never.
+    pub fn set_instance_separation(&mut self, separation: Vec<f32>) {
+        self.separation = separation;
     }
 
     /// Peak-search tuning of the instance voting.
@@ -418,9 +431,13 @@ impl SegEngine {
             return Ok(&self.instance_classes);
         }
         let count = self.voting.assign(&self.cells, &self.offsets, &mut self.cell_ids);
-        self.instance_classes.push(0);
-        self.instance_classes.extend(self.voting.centres().iter().take(count).map(|c| c.class_id));
-        let Some(map) = self.map.as_ref() else { return Ok(&self.instance_classes) };
+        let Some(map) = self.map.as_ref() else {
+            self.instance_classes.push(0);
+            self.instance_classes.extend(self.voting.centres().iter().take(count).map(|c| c.class_id));
+            return Ok(&self.instance_classes);
+        };
+        let centres = &self.voting.centres()[..count];
+        self.merger.merge(frame, map, centres, &self.separation, &mut self.cell_ids, &mut self.instance_classes);
         let (out_w, out_h) = map.grid_size();
         let (w, _) = map.frame_size();
         // Each pixel takes the instance of its cell when the classes agree,

@@ -6,13 +6,15 @@
 //! Layout: [`config`] (architecture, tensor shapes, cost), [`file`] (weight
 //! file reading and object-set checks), [`input`] (frame ↔ grid tables:
 //! network input, upsampling, training targets), [`engine`] (the forward pass
-//! on preallocated buffers), [`boundary`] (cell labels → frame labels), [`voting`] (instances from centre-offset votes). The trainer is `fusepose_train::seg`.
+//! on preallocated buffers), [`boundary`] (cell labels → frame labels), [`voting`] (instances from centre-offset votes), [`merge`] (instances
+//! closer in 3D than two copies of their object can be become one). The trainer is `fusepose_train::seg`.
 
 pub mod boundary;
 pub mod config;
 pub mod engine;
 pub mod file;
 pub mod input;
+pub mod merge;
 pub mod voting;
 
 pub use boundary::Boundary;

@@ -30,6 +30,23 @@ impl Default for VotingParams {
     }
 }
 
+/// `min_votes,merge_radius_cells,min_cells`, e.g. `6,3,6` (the default).
+impl std::str::FromStr for VotingParams {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        let usage = || format!("voting {s:?}: expected MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS, e.g. 6,3,6");
+        let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+        let [votes, radius, cells] = parts[..] else { return Err(usage()) };
+        let (votes, radius): (f32, f32) = (votes.parse().map_err(|_| usage())?, radius.parse().map_err(|_| usage())?);
+        let min_cells = cells.parse().map_err(|_| usage())?;
+        if !(votes.is_finite() && votes >= 0.0 && radius.is_finite() && radius >= 0.0) {
+            return Err(usage());
+        }
+        Ok(Self { min_votes: votes, merge_radius_cells: radius, min_cells })
+    }
+}
+
 /// Upper bound on instances per frame ([`Voting::assign`] stops adding centres beyond it).
 pub const MAX_INSTANCES: usize = 255;
 
