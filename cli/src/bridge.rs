@@ -1,5 +1,6 @@
 //! `fusepose bridge`: the ROS 2 bridges of the `fusepose-ros2` crate
-//! (`ros2-camera`: camera topics in; `ros2`: detections out). See docs/ROS2.md.
+//! (`ros2-camera`: camera topics in; `ros2`: a camera's detections out; `ros2-cell`:
+//! the cell's detections out). See docs/ROS2.md.
 
 #[derive(clap::Args)]
 pub struct Args {

@@ -29,7 +29,7 @@ struct Cli {
 
 #[derive(Subcommand)]
 enum Command {
-    /// ROS 2 bridges over DDS: camera topics in (`ros2-camera`), detections out (`ros2`).
+    /// ROS 2 bridges over DDS: camera topics in (`ros2-camera`), detections out (`ros2`, `ros2-cell`).
     Bridge(bridge::Args),
     /// Act as a camera: replay a dataset or render frames, publish them to fuseposed.
     Camera(camera::Args),

@@ -105,22 +105,22 @@ impl CellConsumer {
         Ok(())
     }
 
-    /// Blocks until a cell message arrives or `timeout` passes; returns the newest.
-    pub fn wait(&mut self, timeout: Duration) -> Result<Option<CellPoseMessage>, ClientError> {
+    /// Blocks until a cell message is waiting or `timeout` passes; returns
+    /// whether one is (take them with [`CellConsumer::drain`]).
+    pub fn wait_ready(&mut self, timeout: Duration) -> Result<bool, ClientError> {
         let subscriber = &self.subscriber;
-        let ready = wait_for_samples(
-            &self.listener,
-            || subscriber.has_samples(),
-            &mut self.predictor,
-            WaitStrategy::Block,
-            timeout,
-        )
-        .map_err(|(operation, detail)| ClientError::Transfer {
-            service: CELL_POSES_SERVICE.to_owned(),
-            operation,
-            detail,
-        })?;
-        if !ready {
+        wait_for_samples(&self.listener, || subscriber.has_samples(), &mut self.predictor, WaitStrategy::Block, timeout)
+            .map_err(|(operation, detail)| ClientError::Transfer {
+                service: CELL_POSES_SERVICE.to_owned(),
+                operation,
+                detail,
+            })
+    }
+
+    /// Blocks until a cell message arrives or `timeout` passes; returns the
+    /// newest (older ones waiting beside it are dropped).
+    pub fn wait(&mut self, timeout: Duration) -> Result<Option<CellPoseMessage>, ClientError> {
+        if !self.wait_ready(timeout)? {
             return Ok(None);
         }
         let mut all = Vec::with_capacity(CELL_BUFFER);

@@ -1,4 +1,5 @@
-//! Pose messages → `vision_msgs/Detection3DArray` and `tf2_msgs/TFMessage`.
+//! Pose messages (one camera's, or the cell's) → `vision_msgs/Detection3DArray`
+//! and `tf2_msgs/TFMessage`.
 //!
 //! Per object: `results[0].hypothesis.class_id` = the object's name in the
 //! daemon's object set, `score` = confidence, `results[0].pose.pose` = the
@@ -8,7 +9,7 @@
 //! `id` = `<object>_<instance>` (instances are numbered per frame, largest
 //! mask first: not stable across frames, see docs/PROTOCOL.md).
 
-use fusepose_client::{PoseMessage, WireObjectPose};
+use fusepose_client::{CellObject, CellPoseMessage, PoseMessage};
 
 use crate::msg::{
     BoundingBox3D, Detection3D, Detection3DArray, Header, ObjectHypothesis, ObjectHypothesisWithPose, Point, Pose,
@@ -54,10 +55,39 @@ fn rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
     [v[0] + w * t[0] + ut[0], v[1] + w * t[1] + ut[1], v[2] + w * t[2] + ut[2]]
 }
 
-fn pose_of(o: &WireObjectPose) -> Pose {
-    let [x, y, z] = o.translation_m;
-    let [qx, qy, qz, qw] = o.quaternion;
+fn pose_of(quaternion: [f64; 4], translation_m: [f64; 3]) -> Pose {
+    let [x, y, z] = translation_m;
+    let [qx, qy, qz, qw] = quaternion;
     Pose { position: Point { x, y, z }, orientation: Quaternion { x: qx, y: qy, z: qz, w: qw } }
+}
+
+/// One object's detection: pose `quaternion` / `translation_m` in `header`'s frame.
+fn detection(
+    header: Header,
+    objects: &ObjectTable,
+    class_id: u16,
+    quaternion: [f64; 4],
+    translation_m: [f64; 3],
+    score: f32,
+    id: String,
+) -> Detection3D {
+    let info = objects.get(class_id);
+    let pose = pose_of(quaternion, translation_m);
+    let centre_offset = rotate(quaternion, info.map_or([0.0; 3], |i| i.box_centre));
+    let mut center = pose;
+    center.position.x += centre_offset[0];
+    center.position.y += centre_offset[1];
+    center.position.z += centre_offset[2];
+    let [sx, sy, sz] = info.map_or([0.0; 3], |i| i.size);
+    Detection3D {
+        header,
+        results: vec![ObjectHypothesisWithPose {
+            hypothesis: ObjectHypothesis { class_id: objects.name(class_id), score: score as f64 },
+            pose: PoseWithCovariance { pose, covariance: [0.0; 36] },
+        }],
+        bbox: BoundingBox3D { center, size: Vector3 { x: sx, y: sy, z: sz } },
+        id,
+    }
 }
 
 /// The detections of one pose message, stamped `stamp` in frame `frame_id`.
@@ -68,27 +98,67 @@ pub fn detections(msg: &PoseMessage, objects: &ObjectTable, stamp: Time, frame_i
         .objects()
         .iter()
         .map(|o| {
-            let info = objects.get(o.class_id);
-            let name = objects.name(o.class_id);
-            let pose = pose_of(o);
-            let centre_offset = rotate(o.quaternion, info.map_or([0.0; 3], |i| i.box_centre));
-            let mut center = pose;
-            center.position.x += centre_offset[0];
-            center.position.y += centre_offset[1];
-            center.position.z += centre_offset[2];
-            let [sx, sy, sz] = info.map_or([0.0; 3], |i| i.size);
-            Detection3D {
-                header: header.clone(),
-                results: vec![ObjectHypothesisWithPose {
-                    hypothesis: ObjectHypothesis { class_id: name.clone(), score: o.confidence as f64 },
-                    pose: PoseWithCovariance { pose, covariance: [0.0; 36] },
-                }],
-                bbox: BoundingBox3D { center, size: Vector3 { x: sx, y: sy, z: sz } },
-                id: format!("{name}_{}", o.instance_id),
-            }
+            let id = format!("{}_{}", objects.name(o.class_id), o.instance_id);
+            detection(header.clone(), objects, o.class_id, o.quaternion, o.translation_m, o.confidence, id)
         })
         .collect();
     Detection3DArray { header, detections }
+}
+
+/// A cell object's id: `<object>_<camera id, 8 hex digits>_<instance>` of
+/// the view whose pose it carries (stable while that camera tracks it).
+pub fn cell_object_id(o: &CellObject, objects: &ObjectTable) -> String {
+    format!("{}_{:08x}_{}", objects.name(o.class_id), o.views[0].camera_id, o.views[0].instance_id)
+}
+
+/// The detections of one cell message in the cell frame `frame_id`: each
+/// stamped with its newest view's capture time (`stamp_of` maps
+/// `CLOCK_MONOTONIC` ns to ROS time), the array with the newest of all (or
+/// the publish time when empty).
+pub fn cell_detections(
+    msg: &CellPoseMessage,
+    objects: &ObjectTable,
+    mut stamp_of: impl FnMut(u64) -> Time,
+    frame_id: &str,
+) -> Detection3DArray {
+    let valid = &msg.objects[..(msg.object_count as usize).min(msg.objects.len())];
+    let newest = valid.iter().map(|o| o.newest_capture_time_ns).max().unwrap_or(msg.published_time_ns);
+    let detections = valid
+        .iter()
+        .map(|o| {
+            let header = Header { stamp: stamp_of(o.newest_capture_time_ns), frame_id: frame_id.to_owned() };
+            let id = cell_object_id(o, objects);
+            detection(header, objects, o.class_id, o.quaternion, o.translation_m, o.confidence, id)
+        })
+        .collect();
+    Detection3DArray { header: Header { stamp: stamp_of(newest), frame_id: frame_id.to_owned() }, detections }
+}
+
+/// One transform per cell object: parent `frame_id` (the cell), child
+/// `<prefix>/<cell object id>` ([`cell_object_id`]), stamped as its detection.
+pub fn cell_transforms(
+    msg: &CellPoseMessage,
+    objects: &ObjectTable,
+    mut stamp_of: impl FnMut(u64) -> Time,
+    frame_id: &str,
+    prefix: &str,
+) -> TfMessage {
+    let valid = &msg.objects[..(msg.object_count as usize).min(msg.objects.len())];
+    let transforms = valid
+        .iter()
+        .map(|o| {
+            let pose = pose_of(o.quaternion, o.translation_m);
+            TransformStamped {
+                header: Header { stamp: stamp_of(o.newest_capture_time_ns), frame_id: frame_id.to_owned() },
+                child_frame_id: format!("{prefix}/{}", cell_object_id(o, objects)),
+                transform: Transform {
+                    translation: Vector3 { x: pose.position.x, y: pose.position.y, z: pose.position.z },
+                    rotation: pose.orientation,
+                },
+            }
+        })
+        .collect();
+    TfMessage { transforms }
 }
 
 /// One transform per object: parent `frame_id`, child `<prefix>/<object>_<instance>`.
@@ -97,7 +167,7 @@ pub fn transforms(msg: &PoseMessage, objects: &ObjectTable, stamp: Time, frame_i
         .objects()
         .iter()
         .map(|o| {
-            let pose = pose_of(o);
+            let pose = pose_of(o.quaternion, o.translation_m);
             TransformStamped {
                 header: Header { stamp, frame_id: frame_id.to_owned() },
                 child_frame_id: format!("{prefix}/{}_{}", objects.name(o.class_id), o.instance_id),
@@ -113,7 +183,7 @@ pub fn transforms(msg: &PoseMessage, objects: &ObjectTable, stamp: Time, frame_i
 
 #[cfg(test)]
 mod tests {
-    use fusepose_client::PoseStatus;
+    use fusepose_client::{CellView, PoseStatus, WireObjectPose};
 
     use super::*;
 
@@ -189,5 +259,37 @@ mod tests {
         assert_eq!(children, ["fusepose/cam0/box_0", "fusepose/cam0/class_9_1"]);
         assert_eq!(tf.transforms[0].transform.translation.z, 0.9);
         assert_eq!(tf.transforms[0].header.frame_id, "f");
+    }
+
+    #[test]
+    fn cell_objects_are_stamped_by_their_newest_view_and_named_by_the_view_they_carry() {
+        let mut msg = CellPoseMessage { object_count: 2, published_time_ns: 99, ..CellPoseMessage::default() };
+        msg.objects[0] = CellObject {
+            class_id: 1,
+            confidence: 0.9,
+            quaternion: [0.0, 0.0, 0.0, 1.0],
+            translation_m: [0.5, 0.0, 0.1],
+            newest_capture_time_ns: 2_000,
+            ..CellObject::default()
+        };
+        msg.objects[0].views[0] = CellView { camera_id: 0xab, instance_id: 3, ..CellView::default() };
+        msg.objects[1] = CellObject { class_id: 2, newest_capture_time_ns: 5_000, ..CellObject::default() };
+        // An entry beyond object_count is not published.
+        msg.objects[2] = CellObject { class_id: 1, newest_capture_time_ns: 9_000, ..CellObject::default() };
+        let stamp_of = |ns: u64| Time { sec: 1, nanosec: ns as u32 };
+        let out = cell_detections(&msg, &table(), stamp_of, "cell");
+        assert_eq!(out.header, Header { stamp: Time { sec: 1, nanosec: 5_000 }, frame_id: "cell".into() });
+        assert_eq!(out.detections.len(), 2);
+        let d = &out.detections[0];
+        assert_eq!((d.id.as_str(), d.header.stamp.nanosec), ("mug_000000ab_3", 2_000));
+        assert_eq!(d.results[0].hypothesis.score, 0.8999999761581421);
+        assert_eq!(d.results[0].pose.pose.position.x, 0.5);
+        let tf = cell_transforms(&msg, &table(), stamp_of, "cell", "fusepose/cell");
+        assert_eq!(tf.transforms[0].child_frame_id, "fusepose/cell/mug_000000ab_3");
+        assert_eq!(tf.transforms[1].header.stamp.nanosec, 5_000);
+        // Nothing in the cell: an empty array at the publish time.
+        let empty = CellPoseMessage { published_time_ns: 77, ..CellPoseMessage::default() };
+        let out = cell_detections(&empty, &table(), stamp_of, "cell");
+        assert!(out.detections.is_empty() && out.header.stamp.nanosec == 77);
     }
 }

@@ -1,12 +1,14 @@
 //! # fusepose-ros2 — ROS 2 in and out over DDS
 //!
-//! Two bridges, each its own process beside `fuseposed` (which never links
+//! Three bridges, each its own process beside `fuseposed` (which never links
 //! DDS), speaking ROS 2 on the wire through `ros2-client` (RustDDS, pure Rust,
 //! no ROS installation):
 //! - [`camera_bridge`]: a ROS 2 camera driver's colour + aligned depth +
 //!   CameraInfo topics → fusepose frames (iceoryx2);
 //! - [`pose_bridge`]: fusepose pose messages → `vision_msgs/Detection3DArray`
-//!   (and optionally `/tf`).
+//!   (and optionally `/tf`);
+//! - [`cell_bridge`]: the daemon's cell poses (every camera's objects in one
+//!   cell frame) → `vision_msgs/Detection3DArray` (and optionally `/tf`).
 //!
 //! Message types are defined here field by field ([`msg`]). See docs/ROS2.md.
 //!
@@ -15,6 +17,7 @@
 //! or the trainer, and nothing of the daemon depends on it.
 
 pub mod camera_bridge;
+pub mod cell_bridge;
 pub mod clock;
 pub mod detections;
 pub mod image;
@@ -30,6 +33,7 @@ use std::path::Path;
 
 use anyhow::Context as _;
 pub use camera_bridge::CameraBridgeArgs;
+pub use cell_bridge::CellBridgeArgs;
 pub use detections::{ObjectInfo, ObjectTable};
 pub use pose_bridge::PoseBridgeArgs;
 
@@ -60,6 +64,9 @@ pub enum BridgeCommand {
     /// Poses of a fusepose camera → vision_msgs/Detection3DArray (and /tf) on ROS 2.
     #[command(name = "ros2")]
     Ros2(PoseBridgeArgs),
+    /// The daemon's cell poses (every camera's objects in the cell frame) → vision_msgs/Detection3DArray (and /tf).
+    #[command(name = "ros2-cell")]
+    Ros2Cell(CellBridgeArgs),
 }
 
 /// Runs the bridge `command` until it is killed.
@@ -70,6 +77,7 @@ pub fn run(command: &BridgeCommand) -> anyhow::Result<()> {
             let objects = object_table(&args.objects, args.scale)?;
             pose_bridge::run(args, objects)
         }
+        BridgeCommand::Ros2Cell(args) => cell_bridge::run(args, object_table(&args.objects, args.scale)?),
     }
 }
 

@@ -7,10 +7,12 @@ with ROS 2 Jazzy message IDL written here and ROS 2's DDS names
 Publishes rendered frames as a realsense2_camera would (colour, aligned depth,
 CameraInfo, all with the same stamp), one frame at a time, and waits for the
 `vision_msgs/Detection3DArray` the pose bridge publishes for that stamp on
-`rt/fusepose/<camera>/detections`. Prints JSON lines on stdout:
+`rt/fusepose/<camera>/detections` (and, with --cell, every array the cell
+bridge publishes on `rt/fusepose/cell/detections`). Prints JSON lines on stdout:
   {"event": "ready"}                         all readers and writers matched
   {"event": "sent", "index": i, "stamp_ns": s}
   {"event": "detections", "stamp_ns": s, "frame_id": f, "detections": [...]}
+  {"event": "cell", "stamp_ns": s, "frame_id": f, "detections": [...]}   with --cell
   {"event": "error", "message": m}
 
 Exit status 3 when cyclonedds cannot be imported (the test then skips).
@@ -46,6 +48,7 @@ def main():
     ap.add_argument("--camera", default="cam0")
     ap.add_argument("--match-timeout", type=float, default=60.0)
     ap.add_argument("--frame-timeout", type=float, default=120.0)
+    ap.add_argument("--cell", action="store_true", help="also read rt/fusepose/cell/detections")
     ap.add_argument("--check-import", action="store_true", help="only check that cyclonedds imports")
     args = ap.parse_args()
 
@@ -178,13 +181,15 @@ def main():
     depth_w = DataWriter(dp, Topic(dp, "rt/camera/camera/aligned_depth_to_color/image_raw", Image), image_qos)
     info_w = DataWriter(dp, Topic(dp, "rt/camera/camera/color/camera_info", CameraInfo), info_qos)
     det_r = DataReader(dp, Topic(dp, f"rt/fusepose/{args.camera}/detections", Detection3DArray), det_qos)
+    cell_r = DataReader(dp, Topic(dp, "rt/fusepose/cell/detections", Detection3DArray), det_qos) if args.cell else None
 
     # Camera bridge reads colour, depth and info; the pose bridge reads info and writes detections.
     deadline = time.monotonic() + args.match_timeout
     while True:
         counts = (len(color_w.get_matched_subscriptions()), len(depth_w.get_matched_subscriptions()),
                   len(info_w.get_matched_subscriptions()), len(det_r.get_matched_publications()))
-        if counts[0] >= 1 and counts[1] >= 1 and counts[2] >= 2 and counts[3] >= 1:
+        cell_ok = cell_r is None or len(cell_r.get_matched_publications()) >= 1
+        if counts[0] >= 1 and counts[1] >= 1 and counts[2] >= 2 and counts[3] >= 1 and cell_ok:
             break
         if time.monotonic() > deadline:
             emit(event="error", message=f"DDS peers never matched (colour, depth, info readers; detection writers): {counts}")
@@ -195,6 +200,28 @@ def main():
 
     def header(stamp_ns, frame_id):
         return Header(stamp=Time(sec=stamp_ns // 1_000_000_000, nanosec=stamp_ns % 1_000_000_000), frame_id=frame_id)
+
+    def listed(arr):
+        return [{
+            "id": d.id,
+            "frame_id": d.header.frame_id,
+            "stamp_ns": d.header.stamp.sec * 1_000_000_000 + d.header.stamp.nanosec,
+            "results": len(d.results),
+            "class_id": d.results[0].hypothesis.class_id if d.results else "",
+            "score": d.results[0].hypothesis.score if d.results else 0.0,
+            "position": [d.results[0].pose.pose.position.x, d.results[0].pose.pose.position.y,
+                         d.results[0].pose.pose.position.z] if d.results else [],
+            "orientation": [d.results[0].pose.pose.orientation.x, d.results[0].pose.pose.orientation.y,
+                            d.results[0].pose.pose.orientation.z,
+                            d.results[0].pose.pose.orientation.w] if d.results else [],
+            "bbox_center": [d.bbox.center.position.x, d.bbox.center.position.y, d.bbox.center.position.z],
+            "bbox_size": [d.bbox.size.x, d.bbox.size.y, d.bbox.size.z],
+        } for d in arr.detections]
+
+    def take_cell():
+        for arr in (cell_r.take(N=16) if cell_r is not None else []):
+            s = arr.header.stamp.sec * 1_000_000_000 + arr.header.stamp.nanosec
+            emit(event="cell", stamp_ns=s, frame_id=arr.header.frame_id, detections=listed(arr))
 
     for index, f in enumerate(frames):
         w, h = f["width"], f["height"]
@@ -219,28 +246,20 @@ def main():
         while not got and time.monotonic() < deadline:
             for arr in det_r.take(N=16):
                 s = arr.header.stamp.sec * 1_000_000_000 + arr.header.stamp.nanosec
-                emit(event="detections", stamp_ns=s, frame_id=arr.header.frame_id, detections=[
-                    {
-                        "id": d.id,
-                        "frame_id": d.header.frame_id,
-                        "stamp_ns": d.header.stamp.sec * 1_000_000_000 + d.header.stamp.nanosec,
-                        "results": len(d.results),
-                        "class_id": d.results[0].hypothesis.class_id if d.results else "",
-                        "score": d.results[0].hypothesis.score if d.results else 0.0,
-                        "position": [d.results[0].pose.pose.position.x, d.results[0].pose.pose.position.y,
-                                     d.results[0].pose.pose.position.z] if d.results else [],
-                        "orientation": [d.results[0].pose.pose.orientation.x, d.results[0].pose.pose.orientation.y,
-                                        d.results[0].pose.pose.orientation.z,
-                                        d.results[0].pose.pose.orientation.w] if d.results else [],
-                        "bbox_center": [d.bbox.center.position.x, d.bbox.center.position.y, d.bbox.center.position.z],
-                        "bbox_size": [d.bbox.size.x, d.bbox.size.y, d.bbox.size.z],
-                    } for d in arr.detections])
+                emit(event="detections", stamp_ns=s, frame_id=arr.header.frame_id, detections=listed(arr))
                 got = got or s == stamp
+            take_cell()
             if not got:
                 time.sleep(0.005)
         if not got:
             emit(event="error", message=f"no detections with stamp {stamp} within {args.frame_timeout} s")
             sys.exit(2)
+    # The cell array of the last frame may come just after its camera's.
+    end = time.monotonic() + 2.0
+    while cell_r is not None and time.monotonic() < end:
+        take_cell()
+        time.sleep(0.01)
+    emit(event="done")
 
 
 if __name__ == "__main__":

@@ -71,11 +71,13 @@ fn every_subcommand_has_help_with_the_shared_flag_names() -> anyhow::Result<()> 
         assert!(helps[sub].contains("--objects <OBJECTS>"), "{sub}: --objects names the object set:\n{}", helps[sub]);
     }
     // The ROS 2 bridges: the daemon's camera by --name, the DDS domain by --domain-id, QoS flags alike.
-    for bridge in ["ros2-camera", "ros2"] {
+    for bridge in ["ros2-camera", "ros2", "ros2-cell"] {
         let text = help(&env, &fp, &["bridge", bridge])?;
-        for flag in ["--name", "--domain-id", "--reliability", "--history-depth", "--durability"] {
+        for flag in ["--domain-id", "--reliability", "--history-depth", "--durability"] {
             assert!(text.contains(flag), "bridge {bridge} has no {flag}:\n{text}");
         }
+        // The cell bridge serves every camera; the others serve the camera named by --name.
+        assert_eq!(text.contains("--name"), bridge != "ros2-cell", "bridge {bridge}:\n{text}");
     }
     for sub in BENCH_SUBCOMMANDS {
         let text = help(&env, &fb, &[sub])?;

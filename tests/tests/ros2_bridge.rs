@@ -8,7 +8,8 @@
 //! the poses as `vision_msgs/Detection3DArray`, which the Cyclone side
 //! receives. The detections must equal the iceoryx2 pose messages (classes,
 //! ids, scores, poses to 1e-6, stamps = the image stamps) and the poses must
-//! match the renderer's ground truth. Skips (with a message) where Python or
+//! match the renderer's ground truth. `fusepose-ros2 ros2-cell` publishes the
+//! daemon's cell output, whose arrays must equal the iceoryx2 cell messages. Skips (with a message) where Python or
 //! `cyclonedds` is missing.
 
 use std::path::{Path, PathBuf};
@@ -16,7 +17,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 use anyhow::Context;
-use fusepose_client::{Consumer, Ipc, PoseMessage, PoseStatus};
+use fusepose_client::{CellConsumer, CellPoseMessage, Consumer, Ipc, PoseMessage, PoseStatus};
 use fusepose_scene::Intrinsics;
 use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
@@ -127,42 +128,48 @@ fn ros2_frames_in_and_detections_out_match_the_iceoryx2_poses() -> anyhow::Resul
     let env = TestEnv::new("ros2")?;
     let config = env.write_daemon_config(&format!(
         "kind = \"net\"\nweights = {weights:?}\nmasks = \"auto\"\nmax_instances = 8\nworker_threads = 2\n\
-         deadline_aware = false"
+         deadline_aware = false\n\n\
+         # Frames reach the daemon 100+ ms after capture through DDS in a debug build: keep them in the cell.\n\
+         [cell]\nmax_age_ms = 10000"
     ))?;
     let objects = fusepose_scene::builtin::builtin_objects();
     let truths = render_frames(&env.dir.path().join("frames"), &objects)?;
     let _daemon = start_daemon(&env, &config)?;
     let ipc = Ipc::new(&env.ipc_options())?;
     let mut consumer = Consumer::open(&ipc, "cam0")?;
+    let mut cell_consumer = CellConsumer::open(&ipc)?;
 
     // A domain of its own per run (0..=232 are valid; ports stay below 65535).
     let nanos = std::time::SystemTime::now().duration_since(std::time::UNIX_EPOCH)?.subsec_nanos();
     let domain = 1 + ((std::process::id() ^ nanos) % 200) as u16;
     let _camera = bridge(&env, domain, &["ros2-camera", "--name", "cam0", "--reliability", "reliable"])?;
     let _poses = bridge(&env, domain, &["ros2", "--name", "cam0", "--tf"])?;
+    let _cell = bridge(&env, domain, &["ros2-cell", "--frame-id", "work_cell", "--tf"])?;
     let mut peer_cmd = Command::new("python3");
     peer_cmd
         .arg(peer_script())
         .arg("--domain")
         .arg(domain.to_string())
         .arg("--frames")
-        .arg(env.dir.path().join("frames"));
+        .arg(env.dir.path().join("frames"))
+        .arg("--cell");
     let peer = Proc::spawn("ros2_peer.py", peer_cmd)?;
 
     // Collect the peer's events and the iceoryx2 pose messages side by side.
     let (mut lines, mut messages): (Vec<String>, Vec<PoseMessage>) = (Vec::new(), Vec::new());
+    let mut cell_messages: Vec<CellPoseMessage> = Vec::new();
     let deadline = Instant::now() + Duration::from_secs(600);
     let finished = |lines: &[String]| {
-        lines.iter().filter(|l| l.contains("\"event\": \"sent\"")).count() == FRAMES
-            && lines.iter().filter(|l| l.contains("\"event\": \"detections\"")).count() >= FRAMES
-            || lines.iter().any(|l| l.contains("\"event\": \"error\""))
+        lines.iter().any(|l| l.contains("\"event\": \"done\"") || l.contains("\"event\": \"error\""))
     };
     while !finished(&lines) && Instant::now() < deadline {
         peer.collect_until(&mut lines, Duration::from_millis(200), finished);
         consumer.drain(&mut messages)?;
+        cell_consumer.drain(&mut cell_messages)?;
     }
     std::thread::sleep(Duration::from_millis(300));
     consumer.drain(&mut messages)?;
+    cell_consumer.drain(&mut cell_messages)?;
     let events: Vec<Value> = lines.iter().filter_map(|l| serde_json::from_str(l).ok()).collect();
     if let Some(e) = events.iter().find(|e| e["event"] == "error") {
         anyhow::bail!("ROS 2 peer failed: {} (all lines: {lines:#?})", e["message"]);
@@ -173,7 +180,7 @@ fn ros2_frames_in_and_detections_out_match_the_iceoryx2_poses() -> anyhow::Resul
 
     let offset = realtime_offset_ns();
     let metrics: Vec<ObjectMetric> = objects.objects.iter().map(|m| ObjectMetric::for_model(m).unwrap()).collect();
-    let (mut expected, mut found, mut compared) = (0usize, 0usize, 0usize);
+    let (mut expected, mut found, mut compared, mut compared_cell) = (0usize, 0usize, 0usize, 0usize);
     for (i, &stamp) in sent.iter().enumerate() {
         // The frame's pose message: its capture time is the image stamp on CLOCK_MONOTONIC.
         let msg = messages
@@ -216,6 +223,44 @@ fn ros2_frames_in_and_detections_out_match_the_iceoryx2_poses() -> anyhow::Resul
             }
             compared += 1;
         }
+        // The cell message this frame triggered (one camera, identity extrinsics) and its ROS 2 array.
+        let cell = cell_messages
+            .iter()
+            .find(|c| {
+                c.objects[..c.object_count as usize].iter().any(|o| o.newest_capture_time_ns == msg.capture_time_ns)
+            })
+            .with_context(|| {
+                let seen: Vec<(u16, u64)> = cell_messages
+                    .iter()
+                    .map(|c| (c.object_count, c.objects.first().map_or(0, |o| o.newest_capture_time_ns)))
+                    .collect();
+                format!(
+                    "frame {i}: no iceoryx2 cell message with objects captured at {} (cell messages: {seen:?})",
+                    msg.capture_time_ns
+                )
+            })?;
+        let cell_det = events
+            .iter()
+            .find(|e| e["event"] == "cell" && e["stamp_ns"].as_i64().is_some_and(|s| (s - stamp).abs() < 1_000_000))
+            .with_context(|| format!("frame {i}: no cell Detection3DArray stamped near {stamp}"))?;
+        assert_eq!(cell_det["frame_id"], "work_cell");
+        let cell_dets = cell_det["detections"].as_array().context("cell detections")?;
+        assert_eq!(cell_dets.len(), cell.object_count as usize, "frame {i}: one cell detection per cell object");
+        for (d, o) in cell_dets.iter().zip(&cell.objects) {
+            let name = &objects.objects[o.class_id as usize - 1].name;
+            let id = format!("{name}_{:08x}_{}", o.views[0].camera_id, o.views[0].instance_id);
+            assert_eq!((d["class_id"].as_str(), d["id"].as_str()), (Some(name.as_str()), Some(id.as_str())));
+            let (p, q) = (f64s(&d["position"]), f64s(&d["orientation"]));
+            assert_eq!((p.len(), q.len()), (3, 4));
+            for (a, b) in p.iter().zip(o.translation_m).chain(q.iter().zip(o.quaternion)) {
+                assert!(
+                    (a - b).abs() <= 1e-6,
+                    "frame {i} cell {name}: DDS {p:?} {q:?} vs iceoryx2 {:?}",
+                    o.translation_m
+                );
+            }
+            compared_cell += 1;
+        }
         for gt in truths[i].objects.iter().filter(|o| o.visible_fraction >= MIN_VISIBLE_FRACTION) {
             let diameter = objects.objects[gt.class_id as usize - 1].diameter;
             expected += 1;
@@ -225,8 +270,9 @@ fn ros2_frames_in_and_detections_out_match_the_iceoryx2_poses() -> anyhow::Resul
         }
     }
     eprintln!(
-        "ros2_bridge: {compared} detections equal to their iceoryx2 poses; {found} of {expected} visible objects within 10% of the diameter (ADD-S)"
+        "ros2_bridge: {compared} detections and {compared_cell} cell detections equal to their iceoryx2 poses; {found} of {expected} visible objects within 10% of the diameter (ADD-S)"
     );
+    assert!(compared_cell > 0, "no cell detections compared");
     assert!(expected >= 5, "too few visible objects: {expected}");
     assert!(found as f64 >= MIN_FOUND_SHARE * expected as f64, "only {found} of {expected} objects found");
     Ok(())
