@@ -14,9 +14,9 @@ use fusepose_client::{CellConsumer, CellPoseMessage, Ipc, IpcOptions};
 
 use crate::clock::ClockMap;
 use crate::detections::{ObjectTable, cell_detections, cell_transforms};
-use crate::msg::{Detection3DArray, TfMessage, Time};
-use crate::node::{open_node, topic};
-use crate::qos::{DurabilityArg, ReliabilityArg, profile, tf_profile};
+use crate::detections_out::DetectionsOut;
+use crate::msg::Time;
+use crate::node::open_node;
 use crate::ratelog::RateLog;
 
 /// Flags of `fusepose bridge ros2-cell`.
@@ -34,24 +34,8 @@ pub struct CellBridgeArgs {
     /// Also publish one transform per cell object on /tf (child `fusepose/cell/<object>_<camera id>_<instance>`).
     #[arg(long)]
     pub tf: bool,
-    /// Object set of the daemon: `builtin` or a folder with one subfolder or .obj/.ply file per object.
-    #[arg(long, default_value = "builtin")]
-    pub objects: String,
-    /// Metres per mesh-file unit of --objects DIR (0.001 for millimetre models).
-    #[arg(long, default_value_t = 1.0)]
-    pub scale: f64,
-    /// Reliability of the detections writer.
-    #[arg(long, value_enum, default_value = "reliable")]
-    pub reliability: ReliabilityArg,
-    /// History depth (keep last N) of the detections writer.
-    #[arg(long, default_value_t = 10)]
-    pub history_depth: usize,
-    /// Durability of the detections writer.
-    #[arg(long, value_enum, default_value = "volatile")]
-    pub durability: DurabilityArg,
-    /// Exit after publishing this many detection arrays (default: run until killed).
-    #[arg(long)]
-    pub count: Option<u64>,
+    #[command(flatten)]
+    pub out: DetectionsOut,
 }
 
 /// Runs the cell bridge until killed (or `--count` arrays are out).
@@ -60,20 +44,7 @@ pub fn run(args: &CellBridgeArgs, objects: ObjectTable) -> anyhow::Result<()> {
     let mut consumer = CellConsumer::open(&ipc).context("subscribing to the daemon's cell poses")?;
     let domain = crate::node::domain_id(args.domain_id)?;
     let mut node = open_node(domain, "fusepose_cell_bridge")?;
-    let qos = profile(args.reliability, args.history_depth, args.durability);
-    let det_topic = topic(&mut node, &args.topic, "vision_msgs", "Detection3DArray", &qos)?;
-    let publisher = node
-        .create_publisher::<Detection3DArray>(&det_topic, None)
-        .map_err(|e| anyhow::anyhow!("creating the writer of {}: {e:?}", args.topic))?;
-    let tf_publisher = if args.tf {
-        let tf_topic = topic(&mut node, "/tf", "tf2_msgs", "TFMessage", &tf_profile())?;
-        Some(
-            node.create_publisher::<TfMessage>(&tf_topic, None)
-                .map_err(|e| anyhow::anyhow!("creating /tf writer: {e:?}"))?,
-        )
-    } else {
-        None
-    };
+    let (publisher, tf_publisher) = args.out.writers(&mut node, &args.topic, args.tf)?;
     tracing::info!(
         domain,
         topic = %args.topic,
@@ -88,7 +59,7 @@ pub fn run(args: &CellBridgeArgs, objects: ObjectTable) -> anyhow::Result<()> {
     let mut batch: Vec<CellPoseMessage> = Vec::new();
     let mut published = 0u64;
     loop {
-        if args.count.is_some_and(|n| published >= n) {
+        if args.out.done(published) {
             return Ok(());
         }
         if !consumer.wait_ready(Duration::from_millis(200))? {

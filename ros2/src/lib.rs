@@ -20,6 +20,7 @@ pub mod camera_bridge;
 pub mod cell_bridge;
 pub mod clock;
 pub mod detections;
+pub mod detections_out;
 pub mod image;
 pub mod msg;
 pub mod node;
@@ -74,10 +75,10 @@ pub fn run(command: &BridgeCommand) -> anyhow::Result<()> {
     match command {
         BridgeCommand::Ros2Camera(args) => camera_bridge::run(args),
         BridgeCommand::Ros2(args) => {
-            let objects = object_table(&args.objects, args.scale)?;
+            let objects = args.out.object_table()?;
             pose_bridge::run(args, objects)
         }
-        BridgeCommand::Ros2Cell(args) => cell_bridge::run(args, object_table(&args.objects, args.scale)?),
+        BridgeCommand::Ros2Cell(args) => cell_bridge::run(args, args.out.object_table()?),
     }
 }
 

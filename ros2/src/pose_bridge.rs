@@ -13,9 +13,10 @@ use fusepose_client::{Consumer, Ipc, IpcOptions, PoseMessage};
 
 use crate::clock::ClockMap;
 use crate::detections::{ObjectTable, detections, transforms};
-use crate::msg::{CameraInfo, Detection3DArray, TfMessage, Time};
+use crate::detections_out::DetectionsOut;
+use crate::msg::{CameraInfo, Time};
 use crate::node::{open_node, topic};
-use crate::qos::{DurabilityArg, ReliabilityArg, profile, tf_profile};
+use crate::qos::{DurabilityArg, ReliabilityArg, profile};
 use crate::ratelog::RateLog;
 use crate::stamps::RecentStamps;
 
@@ -40,24 +41,8 @@ pub struct PoseBridgeArgs {
     /// The camera's CameraInfo topic, for the exact image stamps and frame id; `none` to map times only.
     #[arg(long, default_value = "/camera/camera/color/camera_info")]
     pub info: String,
-    /// Object set of the daemon: `builtin` or a folder with one subfolder or .obj/.ply file per object.
-    #[arg(long, default_value = "builtin")]
-    pub objects: String,
-    /// Metres per mesh-file unit of --objects DIR (0.001 for millimetre models).
-    #[arg(long, default_value_t = 1.0)]
-    pub scale: f64,
-    /// Reliability of the detections writer.
-    #[arg(long, value_enum, default_value = "reliable")]
-    pub reliability: ReliabilityArg,
-    /// History depth (keep last N) of the detections writer.
-    #[arg(long, default_value_t = 10)]
-    pub history_depth: usize,
-    /// Durability of the detections writer.
-    #[arg(long, value_enum, default_value = "volatile")]
-    pub durability: DurabilityArg,
-    /// Exit after publishing this many detection arrays (default: run until killed).
-    #[arg(long)]
-    pub count: Option<u64>,
+    #[command(flatten)]
+    pub out: DetectionsOut,
 }
 
 /// How far a mapped capture time may lie from a CameraInfo stamp and still take it, ns.
@@ -70,20 +55,7 @@ pub fn run(args: &PoseBridgeArgs, objects: ObjectTable) -> anyhow::Result<()> {
         .with_context(|| format!("subscribing to the poses of camera '{}'", args.name))?;
     let mut node = open_node(crate::node::domain_id(args.domain_id)?, &format!("{}_pose_bridge", args.name))?;
     let topic_name = args.topic.clone().unwrap_or_else(|| format!("/fusepose/{}/detections", args.name));
-    let qos = profile(args.reliability, args.history_depth, args.durability);
-    let det_topic = topic(&mut node, &topic_name, "vision_msgs", "Detection3DArray", &qos)?;
-    let publisher = node
-        .create_publisher::<Detection3DArray>(&det_topic, None)
-        .map_err(|e| anyhow::anyhow!("creating the writer of {topic_name}: {e:?}"))?;
-    let tf_publisher = if args.tf {
-        let tf_topic = topic(&mut node, "/tf", "tf2_msgs", "TFMessage", &tf_profile())?;
-        Some(
-            node.create_publisher::<TfMessage>(&tf_topic, None)
-                .map_err(|e| anyhow::anyhow!("creating /tf writer: {e:?}"))?,
-        )
-    } else {
-        None
-    };
+    let (publisher, tf_publisher) = args.out.writers(&mut node, &topic_name, args.tf)?;
     let info = if args.info == "none" {
         None
     } else {
@@ -112,7 +84,7 @@ pub fn run(args: &PoseBridgeArgs, objects: ObjectTable) -> anyhow::Result<()> {
     let mut batch: Vec<PoseMessage> = Vec::new();
     let mut published = 0u64;
     loop {
-        if args.count.is_some_and(|n| published >= n) {
+        if args.out.done(published) {
             return Ok(());
         }
         let ready = consumer.wait_ready(Duration::from_millis(200))?;
