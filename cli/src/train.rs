@@ -292,11 +292,11 @@ fn training_objects(args: &Args) -> anyhow::Result<fusepose_scene::ObjectSet> {
     for (name, symmetry) in apply_symmetry_specs(&mut set, &args.symmetry)? {
         tracing::info!("{name}: symmetry {} (--symmetry)", Describe(&symmetry));
     }
-    if let Some(resume) = &args.resume {
-        if let Ok(file) = fusepose_estimator::net::WeightFile::read(resume) {
-            for name in fusepose_estimator::net::meta::adopt_symmetries(&file.objects, &mut set) {
-                tracing::info!("{name}: symmetry from {}", resume.display());
-            }
+    if let Some(resume) = &args.resume
+        && let Ok(file) = fusepose_estimator::net::WeightFile::read(resume)
+    {
+        for name in file.adopt_symmetries(&mut set) {
+            tracing::info!("{name}: symmetry from {}", resume.display());
         }
     }
     Ok(set)

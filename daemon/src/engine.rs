@@ -63,11 +63,11 @@ pub fn load_objects(config: &EstimatorConfig) -> anyhow::Result<ObjectSet> {
     let mut set = fusepose_scene::mesh_io::load_object_dir(dir, config.objects_scale)
         .map_err(|e| anyhow::anyhow!("estimator.objects = {:?}: {e}", config.objects))?;
     // An unreadable file is reported where the network is loaded.
-    if config.kind == EstimatorKind::Net {
-        if let Ok(file) = WeightFile::read(&config.weights) {
-            for name in file.adopt_symmetries(&mut set) {
-                tracing::debug!(object = %name, weights = %config.weights.display(), "symmetry from the weight file");
-            }
+    if config.kind == EstimatorKind::Net
+        && let Ok(file) = WeightFile::read(&config.weights)
+    {
+        for name in file.adopt_symmetries(&mut set) {
+            tracing::debug!(object = %name, weights = %config.weights.display(), "symmetry from the weight file");
         }
     }
     Ok(set)

@@ -67,11 +67,11 @@ pub fn adopt_symmetries(entries: &[ObjectEntry], set: &mut ObjectSet) -> Vec<Str
         if entry.name != object.name || object.symmetry.is_symmetric() {
             continue;
         }
-        if let Some(symmetry) = entry.symmetries.as_ref().and_then(|s| s.to_symmetry().ok()) {
-            if symmetry.is_symmetric() {
-                object.symmetry = symmetry;
-                adopted.push(object.name.clone());
-            }
+        if let Some(symmetry) = entry.symmetries.as_ref().and_then(|s| s.to_symmetry().ok())
+            && symmetry.is_symmetric()
+        {
+            object.symmetry = symmetry;
+            adopted.push(object.name.clone());
         }
     }
     adopted

@@ -91,11 +91,11 @@ impl InstanceMerger {
         self.parent.clear();
         self.parent.extend((0..n).map(|i| i as u16));
         let mut merged = 0;
-        for a in 0..n {
-            let class = centres[a].class_id;
+        for (a, ca) in centres.iter().enumerate().take(n) {
+            let class = ca.class_id;
             let Some(&min) = separation.get(class as usize - 1) else { continue };
-            for b in a + 1..n {
-                if centres[b].class_id != class {
+            for (b, cb) in centres.iter().enumerate().take(n).skip(a + 1) {
+                if cb.class_id != class {
                     continue;
                 }
                 let (p, q) = (self.centres[a], self.centres[b]);
@@ -116,10 +116,10 @@ impl InstanceMerger {
         self.renumber.resize(n + 1, 0);
         classes.clear();
         classes.push(0);
-        for i in 0..n {
+        for (i, c) in centres.iter().enumerate().take(n) {
             if root(&mut self.parent, i) == i {
                 self.renumber[i + 1] = classes.len() as u16;
-                classes.push(centres[i].class_id);
+                classes.push(c.class_id);
             }
         }
         for i in 0..n {
