@@ -50,6 +50,19 @@ impl ObjectEntry {
     }
 }
 
+impl ObjectEntry {
+    /// Whether both describe the same object: name, symmetry tag, diameter
+    /// and hash; the stored symmetry too when both files carry it (files
+    /// written before it was stored have none).
+    pub fn same_object(&self, other: &ObjectEntry) -> bool {
+        self.name == other.name
+            && self.symmetry == other.symmetry
+            && self.diameter == other.diameter
+            && self.hash == other.hash
+            && (self.symmetries.is_none() || other.symmetries.is_none() || self.symmetries == other.symmetries)
+    }
+}
+
 /// The object list of an object set, in class order.
 pub fn object_entries(set: &ObjectSet) -> Vec<ObjectEntry> {
     set.objects.iter().map(ObjectEntry::of).collect()
@@ -189,5 +202,10 @@ mod tests {
         }
         assert!(adopt_symmetries(&old, &mut bare2).is_empty());
         assert!(adopt_symmetries(&entries, &mut bare).is_empty());
+        // A file from before symmetries were stored still describes the same objects.
+        assert!(old.iter().zip(&entries).all(|(a, b)| a.same_object(b) && b.same_object(a)));
+        let mut other = entries.clone();
+        other[6].diameter *= 1.01;
+        assert!(!other[6].same_object(&entries[6]));
     }
 }

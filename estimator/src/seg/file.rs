@@ -150,7 +150,7 @@ pub fn embed(pose: &[u8], seg: &SegFile) -> Result<Vec<u8>, NetLoadError> {
         return Err(NetLoadError::ObjectCount { file: seg.objects.len(), set: net.objects.len() });
     }
     for (i, (s, n)) in seg.objects.iter().zip(&net.objects).enumerate() {
-        if s != n {
+        if !s.same_object(n) {
             let what = if s.name != n.name {
                 "name"
             } else if s.hash != n.hash {
