@@ -181,7 +181,8 @@ fn python_producer_consumer_and_stats_query_against_a_real_daemon() -> anyhow::R
             let r = &rust.objects()[u64_of(view, "instance_id") as usize];
             assert_eq!(u64_of(o, "class_id"), r.class_id as u64, "{o}");
             let t: Vec<f64> = o["translation_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
-            assert_eq!(t, r.translation_m, "{o}");
+            // The identity extrinsics are still a rotation and an addition in f64: the last bit may move.
+            assert!(t.iter().zip(r.translation_m).all(|(a, b)| (a - b).abs() < 1e-12), "{o} vs {:?}", r.translation_m);
             assert_eq!(u64_of(view, "capture_time_ns"), rust.capture_time_ns);
             cell_objects += 1;
         }
