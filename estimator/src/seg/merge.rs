@@ -62,6 +62,13 @@ impl InstanceMerger {
         classes: &mut Vec<u16>,
     ) -> usize {
         let n = centres.len().min(MAX_INSTANCES);
+        if separation.is_empty() {
+            // Off: the ids stay as voted.
+            classes.clear();
+            classes.push(0);
+            classes.extend(centres.iter().take(n).map(|c| c.class_id));
+            return 0;
+        }
         let (grid_w, grid_h) = map.grid_size();
         let (frame_w, _) = map.frame_size();
         let mid = |r: std::ops::Range<usize>| (r.start + r.end.max(r.start + 1) - 1) as f64 / 2.0;
@@ -191,8 +198,9 @@ mod tests {
         // Other classes at the same place never merge; no separation = never.
         let (merged, _, _) = run(&[centre(1, 15.0, 15.0), centre(2, 15.0, 15.0), centre(2, 15.0, 15.0)], &[0.03]);
         assert_eq!(merged, 0);
-        let (merged, _, _) = run(&[centre(1, 15.0, 15.0), centre(1, 15.0, 15.0), centre(1, 15.0, 15.0)], &[]);
-        assert_eq!(merged, 0);
+        let (merged, ids, classes) = run(&[centre(1, 15.0, 15.0), centre(1, 15.0, 15.0), centre(1, 15.0, 15.0)], &[]);
+        assert_eq!((merged, classes), (0, vec![0, 1, 1, 1]));
+        assert_eq!((ids[15 * 80 + 12], ids[15 * 80 + 22], ids[15 * 80 + 32]), (1, 2, 3));
         // Chains join into the first: three pieces of one object.
         let (merged, ids, classes) =
             run(&[centre(1, 15.0, 15.0), centre(1, 16.0, 15.0), centre(1, 17.0, 15.0)], &[0.03]);
