@@ -16,7 +16,7 @@ use crate::arrival::{ArrivalPredictor, WaitStrategy};
 use crate::consumer::wait_for_samples;
 use crate::services::limits::*;
 use crate::services::{EventService, open_event, pubsub_error, service_name, version_verifier};
-use crate::{CellPoseMessage, ClientError, Ipc, WIRE_VERSION};
+use crate::{CellPoseMessage, ClientError, Ipc};
 
 /// Name of the cell pose service (and of its event service).
 pub const CELL_POSES_SERVICE: &str = "fusepose/cell/poses";
@@ -92,14 +92,7 @@ impl CellConsumer {
             self.subscriber.receive().map_err(|e| ClientError::transfer(CELL_POSES_SERVICE, "receive", &e))?
         {
             let msg = *sample.payload();
-            if msg.format_version != WIRE_VERSION {
-                return Err(ClientError::MessageVersionMismatch {
-                    service: CELL_POSES_SERVICE.to_owned(),
-                    what: "cell pose message",
-                    got: msg.format_version,
-                    ours: WIRE_VERSION,
-                });
-            }
+            ClientError::check_version(CELL_POSES_SERVICE, "cell pose message", msg.format_version)?;
             out.push(msg);
         }
         Ok(())

@@ -13,7 +13,7 @@ use iceoryx2::prelude::*;
 
 use crate::arrival::{ArrivalPredictor, WaitPlan, WaitStrategy, poll_until};
 use crate::services::CameraServices;
-use crate::{ClientError, Ipc, PoseMessage, StatsRequest, StatsSnapshot, WIRE_VERSION, monotonic_ns};
+use crate::{ClientError, Ipc, PoseMessage, StatsRequest, StatsSnapshot, monotonic_ns};
 
 /// Blocks until `has_samples` says true (returns true) or `timeout` passes
 /// (false), waiting on `listener` as `strategy` and `predictor` plan; records
@@ -138,14 +138,7 @@ impl Consumer {
                 .map_err(|e| ClientError::transfer(&self.services.poses_name, "receive", &e))?;
             let Some(sample) = received else { break };
             let msg = *sample.payload();
-            if msg.format_version != WIRE_VERSION {
-                return Err(ClientError::MessageVersionMismatch {
-                    service: self.services.poses_name.clone(),
-                    what: "pose message",
-                    got: msg.format_version,
-                    ours: WIRE_VERSION,
-                });
-            }
+            ClientError::check_version(&self.services.poses_name, "pose message", msg.format_version)?;
             newest = Some(msg);
         }
         Ok(newest)
@@ -202,14 +195,7 @@ impl StatsClient {
         loop {
             if let Some(response) = pending.receive().map_err(|e| ClientError::transfer(service, "receive", &e))? {
                 let snapshot = *response.payload();
-                if snapshot.format_version != WIRE_VERSION {
-                    return Err(ClientError::MessageVersionMismatch {
-                        service: service.clone(),
-                        what: "stats snapshot",
-                        got: snapshot.format_version,
-                        ours: WIRE_VERSION,
-                    });
-                }
+                ClientError::check_version(service, "stats snapshot", snapshot.format_version)?;
                 return Ok(snapshot);
             }
             if Instant::now() >= deadline {

@@ -263,6 +263,16 @@ impl ClientError {
         })
     }
 
+    /// `Ok` when a received message's `format_version` is ours, else
+    /// [`ClientError::MessageVersionMismatch`] naming the service and what was received.
+    pub fn check_version(service: &str, what: &'static str, got: u16) -> Result<(), Self> {
+        if got == crate::WIRE_VERSION {
+            Ok(())
+        } else {
+            Err(Self::MessageVersionMismatch { service: service.to_owned(), what, got, ours: crate::WIRE_VERSION })
+        }
+    }
+
     /// A failed loan, send or receive: [`ClientError::Capacity`] for a capacity limit, else [`ClientError::Transfer`].
     pub fn transfer(service: &str, operation: &'static str, error: &dyn std::fmt::Debug) -> Self {
         Self::capacity(service, error).unwrap_or_else(|| Self::Transfer {
