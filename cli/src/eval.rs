@@ -122,9 +122,10 @@ pub struct Args {
     #[arg(long)]
     pub seg_min_interior: Option<usize>,
     /// `--masks net` with the offset head: the instance vote's peak search,
-    /// MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS (default: the engine's).
+    /// MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS (default: the engine's), or
+    /// `off` (the head ignored: class regions, as without it).
     #[arg(long)]
-    pub seg_voting: Option<fusepose_estimator::seg::voting::VotingParams>,
+    pub seg_voting: Option<fusepose_estimator::seg::voting::VotingMode>,
     /// `--masks net`: how cell labels become frame labels: `cells`,
     /// `erode-cells` or `refine:N` (pixel borders from interpolated logits, N
     /// pixels eroded); default: the engine's.
@@ -187,6 +188,10 @@ pub struct Args {
     pub verify_min_fit: Option<f32>,
     #[arg(long)]
     pub verify_min_inliers: Option<f32>,
+    #[arg(long)]
+    pub verify_min_depth_support: Option<f32>,
+    #[arg(long)]
+    pub verify_max_plane_continuation: Option<f32>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -470,6 +475,8 @@ impl Runner {
                     VerifyConfig {
                         min_fit: args.verify_min_fit.unwrap_or(d.min_fit),
                         min_inlier_fraction: args.verify_min_inliers.unwrap_or(d.min_inlier_fraction),
+                        min_depth_support: args.verify_min_depth_support.unwrap_or(d.min_depth_support),
+                        max_plane_continuation: args.verify_max_plane_continuation.unwrap_or(d.max_plane_continuation),
                         ..d
                     },
                 )
@@ -593,14 +600,31 @@ impl Runner {
                     metrics.get(gt.class_id as usize - 1).map(|m| m.errors(&pose_of(p), &gt.pose).add_s)
                 });
                 if let Some(v) = v {
+                    // What the region truly covers: the most frequent true class under it (0 = no object).
+                    let mut under = vec![0usize; metrics.len() + 1];
+                    if let Some(id) = ws.component_id(p.instance_id as usize) {
+                        for (&c, &l) in ws.component_ids().iter().zip(&frame.labels) {
+                            if c == id {
+                                under[(l as usize).min(metrics.len())] += 1;
+                            }
+                        }
+                    }
+                    let (under_class, _) = under.iter().enumerate().max_by_key(|&(_, n)| *n).unwrap_or((0, &0));
                     eprintln!(
-                        "VTRACE class {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} fit {:.3} res {:.4}",
+                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} fit {:.3} res {:.4}",
+                        frame.scene_id,
+                        frame.im_id,
                         p.class_id,
+                        under_class,
+                        p.mask_pixels,
                         p.translation.z,
                         add_s.map_or(-1.0, |a| a),
                         v.inlier_fraction,
                         v.mask_coverage,
                         v.behind_fraction,
+                        v.off_plane,
+                        v.depth_support,
+                        v.plane_continuation,
                         v.fit,
                         v.depth_residual_m
                     );

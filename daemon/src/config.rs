@@ -191,6 +191,11 @@ pub struct EstimatorConfig {
     /// least fit (inliers × coverage × (1 − behind)) and least inlier fraction.
     pub verify_min_fit: f32,
     pub verify_min_inliers: f32,
+    /// Least share of a pose's silhouette with a depth reading (a pose over
+    /// a void fails) and most share of a flat mask's border on its plane (a
+    /// marking on a table or wall fails); see `VerifyConfig`.
+    pub verify_min_depth_support: f32,
+    pub verify_max_plane_continuation: f32,
     /// Regions of one class whose points fit inside one object (within this
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
@@ -303,6 +308,8 @@ impl Default for EstimatorConfig {
             verify: "drop".to_owned(),
             verify_min_fit: fusepose_estimator::verify::VerifyConfig::default().min_fit,
             verify_min_inliers: fusepose_estimator::verify::VerifyConfig::default().min_inlier_fraction,
+            verify_min_depth_support: fusepose_estimator::verify::VerifyConfig::default().min_depth_support,
+            verify_max_plane_continuation: fusepose_estimator::verify::VerifyConfig::default().max_plane_continuation,
             join_parts: 1.0,
             duplicates: 0.0,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
@@ -516,9 +523,12 @@ impl DaemonConfig {
         if !["drop", "flag", "off"].contains(&e.verify.as_str()) {
             return Err(invalid("estimator.verify", &e.verify, "must be \"drop\", \"flag\" or \"off\""));
         }
-        for (key, v) in
-            [("estimator.verify_min_fit", e.verify_min_fit), ("estimator.verify_min_inliers", e.verify_min_inliers)]
-        {
+        for (key, v) in [
+            ("estimator.verify_min_fit", e.verify_min_fit),
+            ("estimator.verify_min_inliers", e.verify_min_inliers),
+            ("estimator.verify_min_depth_support", e.verify_min_depth_support),
+            ("estimator.verify_max_plane_continuation", e.verify_max_plane_continuation),
+        ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(invalid(key, v, "must be in 0..=1"));
             }

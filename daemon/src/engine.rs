@@ -128,6 +128,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             let cfg = VerifyConfig {
                 min_fit: config.verify_min_fit,
                 min_inlier_fraction: config.verify_min_inliers,
+                min_depth_support: config.verify_min_depth_support,
+                max_plane_continuation: config.verify_max_plane_continuation,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));

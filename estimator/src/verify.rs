@@ -17,6 +17,13 @@
 //! where the model has a shape, and it lies behind the model where the model
 //! overhangs the patch.
 //!
+//! Two more terms refuse poses that depth alone explains: most of the
+//! model's silhouette must have a depth reading (a pose floating over a void
+//! beyond the sensor's range explains the few pixels it touches), and a flat
+//! mask must not continue in its own plane past most of its border (a box
+//! face "flush with" a table patch explains the patch exactly, but a real
+//! box stands out of the table, so its border steps off the plane).
+//!
 //! Buffers are sized at construction; [`Verifier::verify`] does not allocate.
 
 use fusepose_scene::ObjectSet;
@@ -52,6 +59,17 @@ pub struct VerifyConfig {
     pub max_off_plane: f32,
     /// Poses whose median in-mask depth residual exceeds this fail (metres).
     pub max_residual_m: f32,
+    /// Poses where fewer than this share of the model's silhouette (grid
+    /// cells it reaches) has a depth reading fail: a pose floating over a
+    /// void (beyond the sensor's range, a window, a black hole in the depth
+    /// image) is one the depth image does not support.
+    pub min_depth_support: f32,
+    /// A flat mask whose plane goes on past its border, on more than this
+    /// share of the border, is a marking on a surface (a patch of table or
+    /// wall, or a piece of a larger face), not an object standing out of it:
+    /// every pose of it fails. Objects thinner than the depth tolerance
+    /// cannot be told from such markings.
+    pub max_plane_continuation: f32,
 }
 
 impl Default for VerifyConfig {
@@ -66,6 +84,8 @@ impl Default for VerifyConfig {
             max_behind_fraction: 0.3,
             max_off_plane: 0.3,
             max_residual_m: 0.02,
+            min_depth_support: 0.6,
+            max_plane_continuation: 0.5,
         }
     }
 }
@@ -88,11 +108,18 @@ pub struct Verification {
     /// Share of the model's visible samples off the plane of a flat measured
     /// mask (0 when the mask is not flat).
     pub off_plane: f32,
+    /// Grid cells of the model's silhouette with a depth reading / cells of
+    /// its silhouette (any pixel, in the mask or not).
+    pub depth_support: f32,
+    /// Share of the border samples of a flat mask lying on the mask's plane
+    /// ([`VerifyConfig::max_plane_continuation`]); 0 when the mask is not flat.
+    pub plane_continuation: f32,
     /// Samples judged (inliers + outliers).
     pub judged_cells: u32,
     /// Whether the pose passed [`VerifyConfig::min_inlier_fraction`],
     /// [`VerifyConfig::min_fit`], [`VerifyConfig::max_behind_fraction`] and
-    /// [`VerifyConfig::max_residual_m`].
+    /// [`VerifyConfig::max_residual_m`], [`VerifyConfig::min_depth_support`]
+    /// and [`VerifyConfig::max_plane_continuation`].
     pub passed: bool,
 }
 
@@ -224,12 +251,17 @@ impl Verifier {
         // And the model's front surface behind the measured one inside the mask
         // (the whole model too far away: its samples all look hidden).
         let (mut mask_cells, mut mask_covered, mut front_cells, mut behind_cells) = (0u32, 0u32, 0u32, 0u32);
+        let (mut silhouette_cells, mut supported_cells) = (0u32, 0u32);
         let mut plane = Moments::default();
         for gy in 0..g {
             let v = ((v0 + (gy as f32 + 0.5) * ch - 0.5).round() as usize).min(h - 1);
             for gx in 0..g {
                 let u = ((u0 + (gx as f32 + 0.5) * cw - 0.5).round() as usize).min(w - 1);
                 let px = v * w + u;
+                if self.zbuf[gy * g + gx].is_finite() {
+                    silhouette_cells += 1;
+                    supported_cells += frame.depth.metres(px).is_some() as u32;
+                }
                 let Some(z_obs) = frame.depth.metres(px).filter(|_| mask.ids[px] == mask.id) else { continue };
                 mask_cells += 1;
                 plane.add([(u as f32 - cx) / fx * z_obs, (v as f32 - cy) / fy * z_obs, z_obs]);
@@ -255,10 +287,13 @@ impl Verifier {
         let mask_coverage = if mask_cells > 0 { mask_covered as f32 / mask_cells as f32 } else { 0.0 };
         let behind_fraction = if front_cells > 0 { behind_cells as f32 / front_cells as f32 } else { 0.0 };
         let depth_residual_m = median(&mut self.residuals);
+        let depth_support = if silhouette_cells > 0 { supported_cells as f32 / silhouette_cells as f32 } else { 0.0 };
         // A flat measured patch (a table, a wall) explained by a model whose
         // visible surface is not flat there is no object: the share of the
         // model's judged samples off the patch's plane.
-        let off_plane = match plane.flat_plane(FLAT_RMS_M) {
+        let flat = plane.flat_plane(FLAT_RMS_M);
+        let plane_continuation = flat.map_or(0.0, |(n, d)| plane_continuation(frame, mask, n, d));
+        let off_plane = match flat {
             Some((n, d)) if judged > 0 => {
                 let off = samples
                     .iter()
@@ -290,7 +325,9 @@ impl Verifier {
             && fit >= cfg.min_fit
             && behind_fraction <= cfg.max_behind_fraction
             && depth_residual_m.is_finite()
-            && depth_residual_m <= cfg.max_residual_m;
+            && depth_residual_m <= cfg.max_residual_m
+            && depth_support >= cfg.min_depth_support
+            && plane_continuation <= cfg.max_plane_continuation;
         Verification {
             fit,
             depth_residual_m,
@@ -298,6 +335,8 @@ impl Verifier {
             mask_coverage,
             behind_fraction,
             off_plane,
+            depth_support,
+            plane_continuation,
             judged_cells: judged,
             passed,
         }
@@ -330,6 +369,57 @@ fn surface_near(frame: &FrameView<'_>, u: usize, v: usize, w: usize, h: usize, r
     [r / 3.0, 2.0 * r / 3.0, r]
         .iter()
         .any(|&d| DIRS.iter().any(|&(dx, dy)| near(u as f32 + dx * d + 0.5, v as f32 + dy * d + 0.5)))
+}
+
+/// Border samples of [`plane_continuation`] per side of the mask's box.
+const BORDER_LINES: usize = 32;
+/// How far outside the mask a border sample is taken (metres, projected at its depth).
+const BORDER_STEP_M: f32 = 0.012;
+
+/// Share of the mask's border samples that lie on the plane `n·x = d`: on
+/// `BORDER_LINES` rows and columns of the mask's box, the pixels a little
+/// beyond the first and last mask pixel (left / right, top / bottom). Border
+/// samples without depth are left out; 0 when there are none.
+fn plane_continuation(frame: &FrameView<'_>, mask: MaskRef<'_>, n: [f32; 3], d: f32) -> f32 {
+    let (w, h) = (frame.width(), frame.height());
+    let k = &frame.intrinsics;
+    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    let [u0, v0, u1, v1] = mask.bbox.map(|v| v as usize);
+    if u1 >= w || v1 >= h || u1 < u0 || v1 < v0 {
+        return 0.0;
+    }
+    let inside = |u: usize, v: usize| mask.ids[v * w + u] == mask.id;
+    let (mut on, mut all) = (0u32, 0u32);
+    // The sample `step` pixels past the mask pixel (u, v) in direction (du, dv).
+    let mut probe = |u: usize, v: usize, du: isize, dv: isize| {
+        let Some(z_edge) = frame.depth.metres(v * w + u) else { return };
+        let step = (BORDER_STEP_M * fx / z_edge).clamp(3.0, 24.0) as isize;
+        let (pu, pv) = (u as isize + du * step, v as isize + dv * step);
+        if pu < 0 || pv < 0 || pu >= w as isize || pv >= h as isize {
+            return;
+        }
+        let (pu, pv) = (pu as usize, pv as usize);
+        if inside(pu, pv) {
+            return;
+        }
+        let Some(z) = frame.depth.metres(pv * w + pu) else { return };
+        let x = [(pu as f32 - cx) / fx * z, (pv as f32 - cy) / fy * z, z];
+        all += 1;
+        on += ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() <= OFF_PLANE_M / 2.0) as u32;
+    };
+    for i in 0..BORDER_LINES {
+        let v = v0 + (v1 - v0) * (2 * i + 1) / (2 * BORDER_LINES);
+        if let (Some(a), Some(b)) = ((u0..=u1).find(|&u| inside(u, v)), (u0..=u1).rev().find(|&u| inside(u, v))) {
+            probe(a, v, -1, 0);
+            probe(b, v, 1, 0);
+        }
+        let u = u0 + (u1 - u0) * (2 * i + 1) / (2 * BORDER_LINES);
+        if let (Some(a), Some(b)) = ((v0..=v1).find(|&v| inside(u, v)), (v0..=v1).rev().find(|&v| inside(u, v))) {
+            probe(u, a, 0, -1);
+            probe(u, b, 0, 1);
+        }
+    }
+    if all == 0 { 0.0 } else { on as f32 / all as f32 }
 }
 
 /// A measured patch whose points lie within this RMS distance of one plane is flat (metres).

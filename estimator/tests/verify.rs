@@ -1,7 +1,8 @@
 //! Pose verification on rendered scenes of the built-in objects: true poses
 //! pass, poses shifted by 3 cm score lower and fail (always on objects under
-//! 15 cm across, at least 90 % of the time on all), and a bowl pose made up
-//! for a patch of flat table fails.
+//! 15 cm across, at least 90 % of the time on all), and poses made up for a
+//! patch of flat table fail: a bowl standing on it, a box face flush with it,
+//! a can over missing depth.
 
 use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, ObjectPose, Workspace, WorkspaceConfig};
@@ -98,6 +99,43 @@ fn true_poses_pass_and_poses_shifted_by_3_cm_fail() {
     assert!(shifted_passed * 10 <= shifted, "{shifted_passed} of {shifted} poses shifted by 3 cm passed");
 }
 
+/// A `pw`x`ph` px patch of bare table (background label, valid depth, on the
+/// table plane) near the image's lower middle: its corner (u0, v0).
+fn table_patch(r: &Rendered, pw: usize, ph: usize) -> Option<(usize, usize)> {
+    let (w, h) = (r.truth.intrinsics.width as usize, r.truth.intrinsics.height as usize);
+    let table_from_camera = r.truth.camera_from_table.inverse();
+    (0..(h - ph - 10) / 10).rev().flat_map(|j| (0..(w - pw - 10) / 10).map(move |i| (i * 10, j * 10))).find(
+        |&(u0, v0)| {
+            (v0..v0 + ph).all(|v| {
+                (u0..u0 + pw).all(|u| {
+                    let p = v * w + u;
+                    let z = r.target.depth_m()[p];
+                    if r.target.labels()[p] != 0 || z <= 0.0 {
+                        return false;
+                    }
+                    // On the table top: the back-projected point lies in the table plane (z = 0).
+                    (table_from_camera * back_project(r, u, v, z as f64)).z.abs() < 0.01
+                })
+            })
+        },
+    )
+}
+
+fn back_project(r: &Rendered, u: usize, v: usize, z: f64) -> nalgebra::Point3<f64> {
+    let k = &r.truth.intrinsics;
+    nalgebra::Point3::new((u as f64 - k.cx) / k.fx * z, (v as f64 - k.cy) / k.fy * z, z)
+}
+
+/// A class-`class` label plane with one `pw`x`ph` rectangle at (u0, v0).
+fn patch_labels(r: &Rendered, class: u16, (u0, v0): (usize, usize), pw: usize, ph: usize) -> Vec<u16> {
+    let w = r.truth.intrinsics.width as usize;
+    let mut labels = vec![0u16; w * r.truth.intrinsics.height as usize];
+    for v in v0..v0 + ph {
+        labels[v * w + u0..v * w + u0 + pw].fill(class);
+    }
+    labels
+}
+
 #[test]
 fn a_bowl_made_up_for_a_patch_of_table_fails() {
     let set = builtin_objects();
@@ -110,46 +148,15 @@ fn a_bowl_made_up_for_a_patch_of_table_fails() {
             break;
         }
         let r = render(&set, 9_100 + seed);
-        let (w, h) = (r.truth.intrinsics.width as usize, r.truth.intrinsics.height as usize);
-        // A 60x40 px patch of bare table (background label, valid depth) near the image's lower middle.
-        let table_from_camera = r.truth.camera_from_table.inverse();
-        let Some((u0, v0)) = (0..(h - 50) / 10)
-            .rev()
-            .flat_map(|j| (0..(w - 70) / 10).map(move |i| (i * 10, j * 10)))
-            .find(|&(u0, v0)| {
-                (v0..v0 + 40).all(|v| {
-                    (u0..u0 + 60).all(|u| {
-                        let p = v * w + u;
-                        let z = r.target.depth_m()[p];
-                        if r.target.labels()[p] != 0 || z <= 0.0 {
-                            return false;
-                        }
-                        // On the table top: the back-projected point lies in the table plane (z = 0).
-                        let k = &r.truth.intrinsics;
-                        let c = Vector3::new(
-                            (u as f64 - k.cx) / k.fx * z as f64,
-                            (v as f64 - k.cy) / k.fy * z as f64,
-                            z as f64,
-                        );
-                        (table_from_camera * nalgebra::Point3::from(c)).z.abs() < 0.01
-                    })
-                })
-            })
-        else {
-            continue;
-        };
-        let mut labels = vec![0u16; w * h];
-        for v in v0..v0 + 40 {
-            labels[v * w + u0..v * w + u0 + 60].fill(bowl);
-        }
+        let w = r.truth.intrinsics.width as usize;
+        let Some((u0, v0)) = table_patch(&r, 60, 40) else { continue };
+        let labels = patch_labels(&r, bowl, (u0, v0), 60, 40);
         let frame = view(&r, &labels);
         assert_eq!(ws.prepare(&frame, 1).unwrap(), 1);
         // The most plausible ghost: an upright bowl standing on the patch's centre point.
         let (uc, vc) = (u0 + 30, v0 + 20);
         let z = r.target.depth_m()[vc * w + uc] as f64;
-        let k = &r.truth.intrinsics;
-        let on_table =
-            table_from_camera * nalgebra::Point3::new((uc as f64 - k.cx) / k.fx * z, (vc as f64 - k.cy) / k.fy * z, z);
+        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
         let model = set.by_class(bowl).unwrap();
         let table_pose = Pose::from_parts(
             nalgebra::Translation3::new(on_table.x, on_table.y, -model.bbox_min.z),
@@ -161,4 +168,88 @@ fn a_bowl_made_up_for_a_patch_of_table_fails() {
         tried += 1;
     }
     assert!(tried >= 3, "found a bare table patch in only {tried} scenes");
+}
+
+/// The ghost depth alone cannot refuse: a box lying flat with its top face
+/// flush with the table explains a flat table patch exactly (every visible
+/// sample on the measured surface, the rest hidden under it). What gives it
+/// away is that the table's plane goes on past the patch's border, where a
+/// real box would stand out of it.
+#[test]
+fn a_box_face_flush_with_a_table_patch_fails_on_its_border() {
+    let set = builtin_objects();
+    let block = set.class_of("wood_block").unwrap();
+    let model = set.by_class(block).unwrap();
+    let mut verifier = Verifier::new(&set, VerifyConfig::default());
+    let mut ws = workspace(&set);
+    let mut tried = 0;
+    for seed in 0..24 {
+        if tried >= 4 {
+            break;
+        }
+        let r = render(&set, 9_300 + seed);
+        let w = r.truth.intrinsics.width as usize;
+        let Some((u0, v0)) = table_patch(&r, 50, 50) else { continue };
+        let labels = patch_labels(&r, block, (u0, v0), 50, 50);
+        let frame = view(&r, &labels);
+        assert_eq!(ws.prepare(&frame, 1).unwrap(), 1);
+        let (uc, vc) = (u0 + 25, v0 + 25);
+        let z = r.target.depth_m()[vc * w + uc] as f64;
+        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
+        // Upright, sunk by its height: its top face lies in the table plane.
+        let sunk = Pose::from_parts(
+            nalgebra::Translation3::new(on_table.x, on_table.y, -model.bbox_max.z),
+            UnitQuaternion::identity(),
+        );
+        let ghost = r.truth.camera_from_table * sunk;
+        let v = verifier.verify(&frame, mask(&ws, 0), &pose_of(block, 0, &ws, &ghost));
+        assert!(v.plane_continuation > 0.9, "the table goes on past the patch on every side: {v:?}");
+        assert!(!v.passed, "a box face flush with the table passed: {v:?}");
+        // The same pose with the border check off: the other terms accept it,
+        // so the border is what refuses it.
+        let lenient = Verifier::new(&set, VerifyConfig { max_plane_continuation: 1.0, ..VerifyConfig::default() })
+            .verify(&frame, mask(&ws, 0), &pose_of(block, 0, &ws, &ghost));
+        assert!(lenient.off_plane < 0.3, "its visible samples lie on the table: {lenient:?}");
+        tried += 1;
+    }
+    assert!(tried >= 3, "found a bare table patch in only {tried} scenes");
+}
+
+/// A pose over a void (no depth reading under most of its silhouette: beyond
+/// the sensor's range, a hole) is one the depth image does not support.
+#[test]
+fn a_pose_over_missing_depth_fails() {
+    let set = builtin_objects();
+    let can = set.class_of("tomato_soup_can").unwrap();
+    let mut verifier = Verifier::new(&set, VerifyConfig::default());
+    let mut ws = workspace(&set);
+    let mut tried = 0;
+    for seed in 0..24 {
+        if tried >= 3 {
+            break;
+        }
+        let r = render(&set, 9_500 + seed);
+        let w = r.truth.intrinsics.width as usize;
+        let Some((u0, v0)) = table_patch(&r, 60, 60) else { continue };
+        let (uc, vc) = (u0 + 30, v0 + 50);
+        let z = r.target.depth_m()[vc * w + uc] as f64;
+        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
+        let model = set.by_class(can).unwrap();
+        let standing = Pose::from_parts(
+            nalgebra::Translation3::new(on_table.x, on_table.y, -model.bbox_min.z),
+            UnitQuaternion::identity(),
+        );
+        let ghost = r.truth.camera_from_table * standing;
+        // No reading anywhere above the patch's lowest rows (as beyond a sensor's range).
+        let mut depth = r.target.depth_m().to_vec();
+        depth[..(v0 + 50) * w].fill(0.0);
+        let labels = patch_labels(&r, can, (u0, v0), 60, 60);
+        let frame = FrameView { depth: DepthPlane::F32(&depth), ..view(&r, &labels) };
+        assert_eq!(ws.prepare(&frame, 1).unwrap(), 1);
+        let v = verifier.verify(&frame, mask(&ws, 0), &pose_of(can, 0, &ws, &ghost));
+        assert!(v.depth_support < 0.6, "most of the can's silhouette has no depth: {v:?}");
+        assert!(!v.passed, "a can over missing depth passed: {v:?}");
+        tried += 1;
+    }
+    assert!(tried >= 2, "found a bare table patch in only {tried} scenes");
 }

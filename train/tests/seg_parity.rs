@@ -117,6 +117,25 @@ fn engine_offsets_match_burn_forward_and_old_files_have_none() {
     let (_, offsets) = net.forward_all(x);
     let expect = offsets.expect("offset head").into_data().try_to_vec::<f32>().unwrap();
     assert_close(engine.offsets(), &expect);
+    // `VotingMode::Off` ignores the head: class regions, as for a file without it.
+    let (w, h) = (Intrinsics::YCB_VIDEO.width as usize, Intrinsics::YCB_VIDEO.height as usize);
+    let (color, depth) = (vec![90u8; w * h * 3], vec![0.6f32; w * h]);
+    let frame = FrameView {
+        intrinsics: Intrinsics::YCB_VIDEO,
+        color_format: ColorFormat::Rgb8,
+        color: &color,
+        depth: DepthPlane::F32(&depth),
+        labels: None,
+    };
+    let mut buf = Vec::new();
+    let instances =
+        |p: &fusepose_estimator::LabelPlane<'_>| matches!(p, fusepose_estimator::LabelPlane::Instances { .. });
+    assert!(instances(&engine.segment_plane(&frame, &mut buf).unwrap()));
+    engine.set_voting_mode(fusepose_estimator::seg::VotingMode::Off);
+    assert!(!engine.separates_instances());
+    assert!(!instances(&engine.segment_plane(&frame, &mut buf).unwrap()), "Off gives a class plane");
+    engine.set_voting_mode(fusepose_estimator::seg::VotingMode::On(Default::default()));
+    assert!(engine.separates_instances());
     // A file written without the head (as before it existed) loads without offsets.
     let old = SegConfig { offsets: false, ..SegConfig::new(3) };
     let old_path = dir.path().join("old.safetensors");

@@ -6,7 +6,7 @@ use std::path::Path;
 use std::time::Instant;
 
 use anyhow::Context;
-use fusepose_estimator::seg::voting::VotingParams;
+use fusepose_estimator::seg::voting::VotingMode;
 use fusepose_estimator::seg::{Boundary, SegEngine};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
 use fusepose_scene::ObjectSet;
@@ -45,7 +45,7 @@ impl NetMasks {
         max_elongation: Option<f32>,
         boundary: Option<Boundary>,
         min_interior: Option<usize>,
-        voting: Option<VotingParams>,
+        voting: Option<VotingMode>,
     ) -> anyhow::Result<Self> {
         let mut engine = SegEngine::load(weights, objects)
             .with_context(|| format!("--masks net: loading the segmenter of {}", weights.display()))?;
@@ -62,7 +62,7 @@ impl NetMasks {
             engine.set_boundary(b);
         }
         if let Some(v) = voting {
-            engine.set_voting(v);
+            engine.set_voting_mode(v);
         }
         Ok(Self {
             engine,

@@ -17,7 +17,7 @@ use super::config::{INPUT_CHANNELS, SegConfig};
 use super::file::SegFile;
 use super::input::FrameMap;
 use super::merge::InstanceMerger;
-use super::voting::{Voting, VotingParams};
+use super::voting::{Voting, VotingMode, VotingParams};
 use crate::frame::{FrameError, FrameView, LabelPlane};
 use crate::net::NetLoadError;
 use crate::net::gemm::{cols_len, conv3x3, gemm_acc};
@@ -202,6 +202,8 @@ pub struct SegEngine {
     /// Instance id → class id of the last [`SegEngine::segment_instances`] (index 0 = background).
     instance_classes: Vec<u16>,
     voting: Voting,
+    /// Whether the offset head, where the file has one, is used ([`VotingMode`]).
+    use_offsets: bool,
     /// Per-class distance under which two instances are one object (metres; empty = off).
     separation: Vec<f32>,
     merger: InstanceMerger,
@@ -273,6 +275,7 @@ impl SegEngine {
             cell_ids: vec![0; hw(1)],
             instance_classes: Vec::with_capacity(hw(1) + 1),
             voting: Voting::new(s[1].1, s[1].0, VotingParams::default()),
+            use_offsets: true,
             separation: Vec::new(),
             merger: InstanceMerger::default(),
             cols: vec![0.0; cols],
@@ -317,7 +320,7 @@ impl SegEngine {
     /// Whether the file has the centre-offset head, i.e. [`SegEngine::segment_instances`]
     /// separates touching objects of one class.
     pub fn separates_instances(&self) -> bool {
-        self.config.offsets
+        self.config.offsets && self.use_offsets
     }
 
     /// Instances of one class whose 3D centres are closer than
@@ -330,6 +333,18 @@ impl SegEngine {
     /// Peak-search tuning of the instance voting.
     pub fn set_voting(&mut self, params: VotingParams) {
         self.voting.set_params(params);
+    }
+
+    /// Votes instances with the offset head (`On`, the default), or ignores
+    /// it (`Off`: class regions, as for a file without the head).
+    pub fn set_voting_mode(&mut self, mode: VotingMode) {
+        match mode {
+            VotingMode::On(params) => {
+                self.use_offsets = true;
+                self.voting.set_params(params);
+            }
+            VotingMode::Off => self.use_offsets = false,
+        }
     }
 
     /// Instance id per output cell of the last [`SegEngine::segment_instances`].
@@ -426,7 +441,7 @@ impl SegEngine {
     pub fn segment_instances(&mut self, frame: &FrameView<'_>, ids_out: &mut [u16]) -> Result<&[u16], SegError> {
         self.segment(frame, ids_out)?;
         self.instance_classes.clear();
-        if !self.config.offsets {
+        if !self.separates_instances() {
             self.instance_classes.extend(0..=self.config.num_classes as u16);
             return Ok(&self.instance_classes);
         }
@@ -479,7 +494,7 @@ impl SegEngine {
     ) -> Result<LabelPlane<'a>, SegError> {
         frame.validate()?;
         buf.resize(frame.width() * frame.height(), 0);
-        if self.config.offsets {
+        if self.separates_instances() {
             let classes = self.segment_instances(frame, buf)?;
             Ok(LabelPlane::Instances { ids: buf, classes })
         } else {

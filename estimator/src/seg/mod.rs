@@ -22,4 +22,4 @@ pub use config::SegConfig;
 pub use engine::{SegEngine, SegError};
 pub use file::SegFile;
 pub use input::FrameMap;
-pub use voting::VotingParams;
+pub use voting::{VotingMode, VotingParams};

@@ -47,6 +47,27 @@ impl std::str::FromStr for VotingParams {
     }
 }
 
+/// What the segmenter does with its centre-offset head: vote instances
+/// (`On`), or ignore the head and split each class into connected regions
+/// as for a file without it (`Off`; join-parts then rejoins split objects).
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub enum VotingMode {
+    On(VotingParams),
+    Off,
+}
+
+/// `off`, or the peak search of [`VotingParams`] (`6,3,6`).
+impl std::str::FromStr for VotingMode {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s.trim() {
+            "off" => Ok(Self::Off),
+            other => other.parse().map(Self::On).map_err(|e| format!("{e}, or off")),
+        }
+    }
+}
+
 /// Upper bound on instances per frame ([`Voting::assign`] stops adding centres beyond it).
 pub const MAX_INSTANCES: usize = 255;
 
@@ -274,6 +295,17 @@ impl Voting {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn voting_modes_parse_and_bad_ones_name_both_forms() {
+        assert_eq!("off".parse::<VotingMode>(), Ok(VotingMode::Off));
+        assert_eq!(
+            "12,6,6".parse::<VotingMode>(),
+            Ok(VotingMode::On(VotingParams { min_votes: 12.0, merge_radius_cells: 6.0, min_cells: 6 }))
+        );
+        let e = "of".parse::<VotingMode>().unwrap_err();
+        assert!(e.contains("MIN_VOTES") && e.contains("or off"), "{e}");
+    }
 
     /// Cells of two touching 6x6 squares of `class` side by side, each cell's
     /// offset pointing at its own square's centre (plus `noise`).
