@@ -209,6 +209,11 @@ pub struct EstimatorConfig {
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
     pub seg_boundary: String,
+    /// Built-in segmenter with a centre-offset head: `on` (touching objects
+    /// of a class separated by their centre votes), `off` (the head ignored:
+    /// class regions, rejoined by `join_parts`) or a peak search
+    /// `MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS` (`fusepose_estimator::seg::VotingMode`).
+    pub seg_voting: String,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
     pub pin_cpus: Vec<usize>,
@@ -313,6 +318,7 @@ impl Default for EstimatorConfig {
             join_parts: 1.0,
             duplicates: 0.0,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
+            seg_voting: "on".to_owned(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }
@@ -520,6 +526,13 @@ impl DaemonConfig {
                 "must be refine:N (N in 0..=255), erode-cells or cells",
             ));
         }
+        if e.seg_voting.parse::<fusepose_estimator::seg::VotingMode>().is_err() {
+            return Err(invalid(
+                "estimator.seg_voting",
+                &e.seg_voting,
+                "must be \"on\", \"off\" or MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS (e.g. \"6,3,6\")",
+            ));
+        }
         if !["drop", "flag", "off"].contains(&e.verify.as_str()) {
             return Err(invalid("estimator.verify", &e.verify, "must be \"drop\", \"flag\" or \"off\""));
         }
@@ -646,6 +659,10 @@ mod tests {
         assert_eq!(DaemonConfig::parse("[estimator]\nduplicates = 0.5\n").unwrap().estimator.duplicates, 0.5);
         let err = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_boundary"), "{err}");
+        let err = DaemonConfig::parse("[estimator]\nseg_voting = \"no\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.seg_voting") && err.contains("\"off\""), "{err}");
+        let c = DaemonConfig::parse("[estimator]\nseg_voting = \"12,6,6\"\n").unwrap();
+        assert_eq!(c.estimator.seg_voting, "12,6,6");
         let c = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode-cells\"\n").unwrap();
         assert_eq!(c.estimator.seg_boundary, "erode-cells");
         let err = DaemonConfig::parse("[estimator.tracking]\nfull_estimate_every = 0\n").unwrap_err().to_string();

@@ -7,7 +7,7 @@ use std::sync::{Arc, Mutex};
 
 use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
-use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile};
+use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile, VotingMode};
 use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{
     EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
@@ -45,6 +45,8 @@ pub struct EngineSpec {
     pub separations: Vec<f32>,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
+    /// What the segmenter does with a centre-offset head (`estimator.seg_voting`).
+    pub seg_voting: VotingMode,
     /// The network's and segmenter's cost measured at start (network only).
     pub startup_cost: Option<crate::startup_cost::StartupCost>,
     /// The segmenter engine every camera of this spec uses (made by the first
@@ -140,6 +142,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         // Checked by the config's validation; a bad value there is an error, not this default.
         spec.seg_boundary =
             config.seg_boundary.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_boundary: {e}"))?;
+        spec.seg_voting =
+            config.seg_voting.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_voting: {e}"))?;
         spec.masks = config.masks;
         if let (Some(seg), Some(cost)) = (&spec.segmenter, spec.startup_cost.as_mut()) {
             match crate::startup_cost::measure_segmenter(seg, spec.seg_boundary) {
@@ -173,6 +177,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             part_extents: Vec::new(),
             separations: Vec::new(),
             seg_boundary: Boundary::default(),
+            seg_voting: VotingMode::On(Default::default()),
             startup_cost: None,
             shared_segmenter: Default::default(),
         })
@@ -190,6 +195,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             part_extents: Vec::new(),
             separations: Vec::new(),
             seg_boundary: Boundary::default(),
+            seg_voting: VotingMode::On(Default::default()),
             startup_cost: None,
             shared_segmenter: Default::default(),
         }),
@@ -273,6 +279,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         part_extents: Vec::new(),
         separations: Vec::new(),
         seg_boundary: Boundary::default(),
+        seg_voting: VotingMode::On(Default::default()),
         startup_cost,
         shared_segmenter: Default::default(),
     })
@@ -409,6 +416,7 @@ impl PoseEngine {
                 None => {
                     let mut seg = SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?;
                     seg.set_boundary(spec.seg_boundary);
+                    seg.set_voting_mode(spec.seg_voting);
                     seg.set_instance_separation(spec.separations.clone());
                     spec.shared_segmenter.get_or_init(|| Arc::new(Mutex::new(seg))).clone()
                 }

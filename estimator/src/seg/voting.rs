@@ -56,14 +56,15 @@ pub enum VotingMode {
     Off,
 }
 
-/// `off`, or the peak search of [`VotingParams`] (`6,3,6`).
+/// `on` (the default peak search), `off`, or a peak search of [`VotingParams`] (`6,3,6`).
 impl std::str::FromStr for VotingMode {
     type Err = String;
 
     fn from_str(s: &str) -> Result<Self, Self::Err> {
         match s.trim() {
             "off" => Ok(Self::Off),
-            other => other.parse().map(Self::On).map_err(|e| format!("{e}, or off")),
+            "on" => Ok(Self::On(VotingParams::default())),
+            other => other.parse().map(Self::On).map_err(|e| format!("{e}, or on, or off")),
         }
     }
 }
@@ -305,6 +306,7 @@ mod tests {
         );
         let e = "of".parse::<VotingMode>().unwrap_err();
         assert!(e.contains("MIN_VOTES") && e.contains("or off"), "{e}");
+        assert_eq!("on".parse::<VotingMode>(), Ok(VotingMode::On(VotingParams::default())));
     }
 
     /// Cells of two touching 6x6 squares of `class` side by side, each cell's
