@@ -329,8 +329,9 @@ impl CameraState {
         times: &mut StageTimes,
     ) -> bool {
         // The estimator fits its work into what is left of the deadline, minus
-        // the verification measured on recent frames and the publish margin.
-        let reserve_ns = PUBLISH_MARGIN_NS + self.engine.post_estimate_reserve_ns();
+        // the publish margin (and, once the frame's instances are known, the
+        // verification they will take: `PoseEngine::run`).
+        let reserve_ns = PUBLISH_MARGIN_NS;
         let end_ns = header.capture_time_ns.saturating_add(self.deadline_ns).min(slice_end_ns.unwrap_or(u64::MAX));
         let left_ns = end_ns.saturating_sub(monotonic_ns() + reserve_ns);
         self.engine.set_deadline(Some(std::time::Instant::now() + std::time::Duration::from_nanos(left_ns)));

@@ -328,11 +328,21 @@ pub struct PoseEngine {
     rejected: usize,
     /// Poses that failed verification in the last frame (dropped or flagged).
     failed_verification: usize,
-    /// Decaying maximum of the time spent after the estimate (verification), ns.
+    /// Moving average of the time after the estimate (verification,
+    /// duplicates) per pose, ns; [`POST_ESTIMATE_MARGIN`] × it × the frame's
+    /// instances is kept free of the estimator's deadline.
     post_estimate_ns: f64,
+    /// The frame's own deadline (`set_deadline`); the estimator gets it less
+    /// the post-estimate reserve once the frame's instances are known.
+    deadline: Option<std::time::Instant>,
     /// The segmenter's instance → class table for the current frame.
     instance_classes: Vec<u16>,
 }
+
+/// Safety factor on the measured post-estimate time per pose when reserving it.
+const POST_ESTIMATE_MARGIN: f64 = 1.5;
+/// Weight of a new frame in the post-estimate moving average.
+const POST_ESTIMATE_GAIN: f64 = 0.1;
 
 /// Checks each pose against the frame's depth and its instance mask into
 /// `verdicts` (same order) and returns how many failed; with `drop` removes
@@ -442,6 +452,7 @@ impl PoseEngine {
             rejected: 0,
             failed_verification: 0,
             post_estimate_ns: 0.0,
+            deadline: None,
             instance_classes: Vec::with_capacity(fusepose_estimator::seg::voting::MAX_INSTANCES + 1),
         })
     }
@@ -471,6 +482,7 @@ impl PoseEngine {
             rejected: 0,
             failed_verification: 0,
             post_estimate_ns: 0.0,
+            deadline: None,
             instance_classes: Vec::new(),
         })
     }
@@ -514,7 +526,12 @@ impl PoseEngine {
             _ => frame,
         };
         let t0 = fusepose_client::monotonic_ns();
-        workspace.prepare(frame, seed)?;
+        let instances = workspace.prepare(frame, seed)?;
+        // What verification will take for these instances comes off the estimator's time.
+        let reserve = std::time::Duration::from_nanos(
+            (POST_ESTIMATE_MARGIN * self.post_estimate_ns * instances.min(workspace.config.max_instances) as f64) as u64,
+        );
+        estimator.set_deadline(self.deadline.map(|d| d.checked_sub(reserve).unwrap_or(d)));
         let t1 = fusepose_client::monotonic_ns();
         let result = estimator.estimate(frame, workspace, &mut self.poses);
         let t2 = fusepose_client::monotonic_ns();
@@ -523,6 +540,7 @@ impl PoseEngine {
         match result {
             Ok(()) => {
                 self.poses.retain_confident(self.min_confidence);
+                let estimated = self.poses.len();
                 self.failed_verification = verify_poses(
                     self.verifier.as_mut(),
                     self.workspace.as_ref(),
@@ -540,10 +558,16 @@ impl PoseEngine {
                     &mut self.scores,
                     &mut self.duplicate_marks,
                 );
-                // Slow decay: a frame with many objects verifies longest, and
-                // the next such frame must not be planned without its cost.
-                let post = (fusepose_client::monotonic_ns() - t2) as f64;
-                self.post_estimate_ns = post.max(self.post_estimate_ns * 0.99);
+                // Per pose: a frame with many objects verifies longest, and is
+                // planned with its own count (a decaying maximum of whole frames
+                // kept one slow frame's cost for the next hundred).
+                if estimated > 0 {
+                    let per_pose = (fusepose_client::monotonic_ns() - t2) as f64 / estimated as f64;
+                    self.post_estimate_ns = match self.post_estimate_ns {
+                        0.0 => per_pose,
+                        old => old + POST_ESTIMATE_GAIN * (per_pose - old),
+                    };
+                }
                 Ok(())
             }
             Err(EstimateError::Frame(e)) => Err(EngineFailure::Refused(e)),
@@ -554,10 +578,7 @@ impl PoseEngine {
     /// The next [`PoseEngine::run`] should end by `deadline` (the estimator
     /// degrades to fit), unless deadline-aware estimation is off.
     pub fn set_deadline(&mut self, deadline: Option<std::time::Instant>) {
-        let deadline = deadline.filter(|_| !self.ignore_deadlines);
-        if let Some(e) = self.estimator.as_mut() {
-            e.set_deadline(deadline);
-        }
+        self.deadline = deadline.filter(|_| !self.ignore_deadlines);
     }
 
     /// `estimator.deadline_aware`: false runs every frame in full whatever its deadline.
@@ -585,8 +606,8 @@ impl PoseEngine {
         self.rejected
     }
 
-    /// Time to keep free after the estimate for what follows it (verification), ns.
-    pub fn post_estimate_reserve_ns(&self) -> u64 {
+    /// Measured time after the estimate per pose (verification, duplicates), ns.
+    pub fn post_estimate_per_pose_ns(&self) -> u64 {
         self.post_estimate_ns as u64
     }
 
