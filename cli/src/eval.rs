@@ -178,6 +178,11 @@ pub struct Args {
     /// daemon's `estimator.duplicates`.
     #[arg(long, default_value_t = 0.0)]
     pub duplicates: f32,
+    /// Of two poses whose solids overlap by more than this share, the one
+    /// more inside the other is dropped, as the daemon's
+    /// `estimator.max_interpenetration` (1 = off).
+    #[arg(long, default_value_t = fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE)]
+    pub max_interpenetration: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -247,10 +252,11 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     data.bind(&objects)?;
     let mut mask_sources = args.masks.clone();
     mask_sources.dedup();
+    let solids = std::sync::Arc::new(fusepose_estimator::interpenetration::Solids::new(&objects));
     let mut runners = kinds
         .iter()
         .flat_map(|&k| mask_sources.iter().map(move |&m| (k, m)))
-        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &args))
+        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &solids, &args))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut net_masks = match mask_sources.contains(&MaskSource::Net) {
         false => None,
@@ -399,6 +405,10 @@ struct Runner {
     separations: Vec<f32>,
     /// Poses dropped as duplicates.
     duplicates: usize,
+    /// `--max-interpenetration`, the object solids, and the poses it dropped.
+    max_interpenetration: f32,
+    solids: std::sync::Arc<fusepose_estimator::interpenetration::Solids>,
+    interpenetrating: usize,
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -413,6 +423,7 @@ impl Runner {
         masks: MaskSource,
         several_masks: bool,
         objects: &ObjectSet,
+        solids: &std::sync::Arc<fusepose_estimator::interpenetration::Solids>,
         args: &Args,
     ) -> anyhow::Result<Self> {
         let name =
@@ -485,6 +496,9 @@ impl Runner {
             scores: Vec::new(),
             separations: fusepose_estimator::duplicates::separations(objects, args.duplicates),
             duplicates: 0,
+            max_interpenetration: args.max_interpenetration,
+            solids: solids.clone(),
+            interpenetrating: 0,
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -526,6 +540,7 @@ impl Runner {
         if estimated.is_ok() {
             self.verify(&view, frame, metrics);
             self.suppress_duplicates();
+            self.suppress_interpenetrating();
         }
         if let Err(e) = estimated {
             let reason = match &e {
@@ -671,6 +686,17 @@ impl Runner {
         let mut dropped = Vec::new();
         self.duplicates +=
             fusepose_estimator::duplicates::suppress(&mut self.poses, &self.separations, &self.scores, &mut dropped);
+        let mut it = dropped.iter();
+        self.scores.retain(|_| !it.next().copied().unwrap_or(false));
+    }
+
+    /// Drops the pose more inside another ([`fusepose_estimator::interpenetration`]), as the daemon.
+    fn suppress_interpenetrating(&mut self) {
+        let mut dropped = Vec::new();
+        self.interpenetrating +=
+            self.solids.suppress(&mut self.poses, self.max_interpenetration, &self.scores, &mut dropped);
+        let mut it = dropped.iter();
+        self.scores.retain(|_| !it.next().copied().unwrap_or(false));
     }
 
     fn print(&self, dataset: &str, frames: usize) {
@@ -698,6 +724,7 @@ impl Runner {
             println!("regions joined as pieces of one object: {}", self.joined);
             println!("poses dropped as duplicates: {}", self.duplicates);
         }
+        println!("poses dropped inside another: {}", self.interpenetrating);
         if self.instance_counts.truth > 0 {
             println!("{}", self.instance_counts.summary());
         }
@@ -736,6 +763,7 @@ impl Runner {
             o.insert("unmatched_estimates".into(), self.unmatched.into());
             o.insert("joined_parts".into(), self.joined.into());
             o.insert("duplicates_dropped".into(), self.duplicates.into());
+            o.insert("interpenetrating_dropped".into(), self.interpenetrating.into());
             if self.instance_counts.truth > 0 {
                 o.insert("instances".into(), self.instance_counts.json());
             }

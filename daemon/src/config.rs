@@ -205,6 +205,10 @@ pub struct EstimatorConfig {
     /// pose that close to a better-fitting pose of its class is dropped
     /// (`fusepose_estimator::duplicates`). 0 = off.
     pub duplicates: f32,
+    /// Two solid objects cannot share space: of two poses whose solids
+    /// overlap by more than this share, the one more inside the other is
+    /// dropped (`fusepose_estimator::interpenetration`). 1 = off.
+    pub max_interpenetration: f32,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -317,6 +321,7 @@ impl Default for EstimatorConfig {
             verify_max_plane_continuation: fusepose_estimator::verify::VerifyConfig::default().max_plane_continuation,
             join_parts: 1.0,
             duplicates: 0.0,
+            max_interpenetration: fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "on".to_owned(),
             pin_cpus: Vec::new(),
@@ -516,6 +521,13 @@ impl DaemonConfig {
         if !(e.join_parts.is_finite() && (0.0..=4.0).contains(&e.join_parts)) {
             return Err(invalid("estimator.join_parts", e.join_parts, "must be in 0..=4 (0 = off)"));
         }
+        if !(e.max_interpenetration.is_finite() && (0.05..=1.0).contains(&e.max_interpenetration)) {
+            return Err(invalid(
+                "estimator.max_interpenetration",
+                e.max_interpenetration,
+                "must be in 0.05..=1 (1 = off)",
+            ));
+        }
         if !(e.duplicates.is_finite() && (0.0..=2.0).contains(&e.duplicates)) {
             return Err(invalid("estimator.duplicates", e.duplicates, "must be in 0..=2 (0 = off)"));
         }
@@ -657,6 +669,8 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\nduplicates = 3\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.duplicates") && err.contains("0..=2"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\nduplicates = 0.5\n").unwrap().estimator.duplicates, 0.5);
+        let err = DaemonConfig::parse("[estimator]\nmax_interpenetration = 0\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.max_interpenetration") && err.contains("1 = off"), "{err}");
         let err = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_boundary"), "{err}");
         let err = DaemonConfig::parse("[estimator]\nseg_voting = \"no\"\n").unwrap_err().to_string();

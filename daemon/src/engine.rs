@@ -6,6 +6,7 @@
 use std::sync::{Arc, Mutex};
 
 use fusepose_client::{STAGE_COUNT, Stage};
+use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
 use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile, VotingMode};
 use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
@@ -43,6 +44,8 @@ pub struct EngineSpec {
     /// Per-class distance under which two instances or poses are one object
     /// (`estimator.duplicates`); empty = off.
     pub separations: Vec<f32>,
+    /// Object solids and `estimator.max_interpenetration` (None = off).
+    pub interpenetration: Option<(Arc<Solids>, f32)>,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
     /// What the segmenter does with a centre-offset head (`estimator.seg_voting`).
@@ -138,6 +141,9 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
+        if config.max_interpenetration < 1.0 {
+            spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
+        }
         spec.segmenter = segmenter(config, &objects)?;
         // Checked by the config's validation; a bad value there is an error, not this default.
         spec.seg_boundary =
@@ -176,6 +182,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             verify: None,
             part_extents: Vec::new(),
             separations: Vec::new(),
+            interpenetration: None,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::On(Default::default()),
             startup_cost: None,
@@ -194,6 +201,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             verify: None,
             part_extents: Vec::new(),
             separations: Vec::new(),
+            interpenetration: None,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::On(Default::default()),
             startup_cost: None,
@@ -278,6 +286,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         verify: None,
         part_extents: Vec::new(),
         separations: Vec::new(),
+        interpenetration: None,
         seg_boundary: Boundary::default(),
         seg_voting: VotingMode::On(Default::default()),
         startup_cost,
@@ -320,6 +329,8 @@ pub struct PoseEngine {
     verify_drop: bool,
     /// `estimator.duplicates` per class (empty = off), and scratch for [`drop_duplicates`].
     separations: Vec<f32>,
+    /// Object solids and `estimator.max_interpenetration` (None = off).
+    interpenetration: Option<(Arc<Solids>, f32)>,
     scores: Vec<f32>,
     duplicate_marks: Vec<bool>,
     /// The verification of each pose in `poses` (same order), when verifying.
@@ -386,13 +397,41 @@ fn drop_duplicates(
     if separations.is_empty() || poses.len() < 2 {
         return;
     }
+    rank(poses, verdicts, scores);
+    let dropped = fusepose_estimator::duplicates::suppress(poses, separations, scores, marks);
+    forget_dropped(dropped, verdicts, marks);
+}
+
+/// Drops the pose more inside another (`fusepose_estimator::interpenetration`),
+/// keeping `verdicts` in step. No allocation.
+fn drop_interpenetrating(
+    poses: &mut PoseSet,
+    verdicts: &mut Vec<Verification>,
+    solids: Option<&(Arc<Solids>, f32)>,
+    scores: &mut Vec<f32>,
+    marks: &mut Vec<bool>,
+) {
+    let Some((solids, max_share)) = solids else { return };
+    if poses.len() < 2 {
+        return;
+    }
+    rank(poses, verdicts, scores);
+    let dropped = solids.suppress(poses, *max_share, scores, marks);
+    forget_dropped(dropped, verdicts, marks);
+}
+
+/// Scores that rank poses: the verification fit when verifying, else the confidence.
+fn rank(poses: &PoseSet, verdicts: &[Verification], scores: &mut Vec<f32>) {
     scores.clear();
     if verdicts.len() == poses.len() {
         scores.extend(verdicts.iter().map(|v| v.fit));
     } else {
         scores.extend(poses.as_slice().iter().map(|p| p.confidence));
     }
-    let dropped = fusepose_estimator::duplicates::suppress(poses, separations, scores, marks);
+}
+
+/// Removes the verdicts of the poses `marks` dropped.
+fn forget_dropped(dropped: usize, verdicts: &mut Vec<Verification>, marks: &[bool]) {
     if dropped > 0 && !verdicts.is_empty() {
         let mut it = marks.iter();
         verdicts.retain(|_| !it.next().copied().unwrap_or(false));
@@ -447,6 +486,7 @@ impl PoseEngine {
             verify_drop: spec.verify.as_ref().is_some_and(|v| v.2),
             verdicts: Vec::with_capacity(max_instances),
             separations: spec.separations.clone(),
+            interpenetration: spec.interpenetration.clone(),
             scores: Vec::with_capacity(max_instances),
             duplicate_marks: Vec::with_capacity(max_instances),
             rejected: 0,
@@ -477,6 +517,7 @@ impl PoseEngine {
             verify_drop: false,
             verdicts: Vec::new(),
             separations: Vec::new(),
+            interpenetration: None,
             scores: Vec::new(),
             duplicate_marks: Vec::new(),
             rejected: 0,
@@ -529,7 +570,8 @@ impl PoseEngine {
         let instances = workspace.prepare(frame, seed)?;
         // What verification will take for these instances comes off the estimator's time.
         let reserve = std::time::Duration::from_nanos(
-            (POST_ESTIMATE_MARGIN * self.post_estimate_ns * instances.min(workspace.config.max_instances) as f64) as u64,
+            (POST_ESTIMATE_MARGIN * self.post_estimate_ns * instances.min(workspace.config.max_instances) as f64)
+                as u64,
         );
         estimator.set_deadline(self.deadline.map(|d| d.checked_sub(reserve).unwrap_or(d)));
         let t1 = fusepose_client::monotonic_ns();
@@ -555,6 +597,13 @@ impl PoseEngine {
                     &mut self.poses,
                     &mut self.verdicts,
                     &self.separations,
+                    &mut self.scores,
+                    &mut self.duplicate_marks,
+                );
+                drop_interpenetrating(
+                    &mut self.poses,
+                    &mut self.verdicts,
+                    self.interpenetration.as_ref(),
                     &mut self.scores,
                     &mut self.duplicate_marks,
                 );

@@ -14,6 +14,7 @@ pub mod duplicates;
 pub mod frame;
 pub mod icp;
 pub mod instances;
+pub mod interpenetration;
 pub mod net;
 pub mod parts;
 pub mod poses;
