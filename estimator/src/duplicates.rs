@@ -45,12 +45,7 @@ pub fn suppress(poses: &mut PoseSet, separation: &[f32], scores: &[f32], dropped
                 && (score(j) > score(i) || (score(j) == score(i) && j < i))
         });
     }
-    let mut k = 0;
-    poses.retain(|_| {
-        k += 1;
-        !dropped[k - 1]
-    });
-    dropped.iter().filter(|&&d| d).count()
+    poses.remove_marked(dropped)
 }
 
 #[cfg(test)]

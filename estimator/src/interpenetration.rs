@@ -210,12 +210,7 @@ impl Solids {
                 dropped[loser] = true;
             }
         }
-        let mut k = 0;
-        poses.retain(|_| {
-            k += 1;
-            !dropped[k - 1]
-        });
-        dropped.iter().filter(|&&d| d).count()
+        poses.remove_marked(dropped)
     }
 }
 

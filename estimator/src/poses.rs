@@ -63,6 +63,14 @@ impl PoseSet {
         self.poses.retain(keep);
     }
 
+    /// Removes pose `i` where `dropped[i]` (poses beyond `dropped` stay) and
+    /// returns how many went. No allocation.
+    pub fn remove_marked(&mut self, dropped: &[bool]) -> usize {
+        let mut it = dropped.iter();
+        self.poses.retain(|_| !it.next().copied().unwrap_or(false));
+        dropped.iter().filter(|&&d| d).count()
+    }
+
     pub fn as_slice(&self) -> &[ObjectPose] {
         &self.poses
     }
