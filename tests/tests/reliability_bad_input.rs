@@ -173,7 +173,10 @@ impl Rig {
 fn every_bad_input_class_gets_its_own_reason_and_later_frames_are_served() -> anyhow::Result<()> {
     let env = TestEnv::new("badinput")?;
     // ICP on the built-in objects: label ids above their count are out of range.
-    let config = env.write_daemon_config("kind = \"icp\"\nmin_pixels = 20\nnum_points = 64")?;
+    // Verification off: the frames' objects are patches of one flat depth
+    // plane, which verification rightly refuses as markings on a surface
+    // (estimator/tests/verify.rs); this test is about the wire.
+    let config = env.write_daemon_config("kind = \"icp\"\nmin_pixels = 20\nnum_points = 64\nverify = \"off\"")?;
     let _daemon = start_daemon(&env, &config)?;
     let ipc = Ipc::new(&env.ipc_options())?;
     let producer = Producer::create(&ipc, "cam0", largest_layout())?;
