@@ -197,6 +197,8 @@ pub struct Args {
     pub verify_min_depth_support: Option<f32>,
     #[arg(long)]
     pub verify_max_plane_continuation: Option<f32>,
+    #[arg(long)]
+    pub verify_max_depth_continuity: Option<f32>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -626,7 +628,7 @@ impl Runner {
                     }
                     let (under_class, _) = under.iter().enumerate().max_by_key(|&(_, n)| *n).unwrap_or((0, &0));
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} fit {:.3} res {:.4}",
+                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} fit {:.3} res {:.4}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -640,6 +642,7 @@ impl Runner {
                         v.off_plane,
                         v.depth_support,
                         v.plane_continuation,
+                        v.depth_continuity,
                         v.fit,
                         v.depth_residual_m
                     );

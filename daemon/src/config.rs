@@ -196,6 +196,9 @@ pub struct EstimatorConfig {
     /// marking on a table or wall fails); see `VerifyConfig`.
     pub verify_min_depth_support: f32,
     pub verify_max_plane_continuation: f32,
+    /// Most share of a mask's border where the depth goes on smoothly (any
+    /// surface shape; `VerifyConfig::max_depth_continuity`).
+    pub verify_max_depth_continuity: f32,
     /// Regions of one class whose points fit inside one object (within this
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
@@ -319,6 +322,7 @@ impl Default for EstimatorConfig {
             verify_min_inliers: fusepose_estimator::verify::VerifyConfig::default().min_inlier_fraction,
             verify_min_depth_support: fusepose_estimator::verify::VerifyConfig::default().min_depth_support,
             verify_max_plane_continuation: fusepose_estimator::verify::VerifyConfig::default().max_plane_continuation,
+            verify_max_depth_continuity: fusepose_estimator::verify::VerifyConfig::default().max_depth_continuity,
             join_parts: 1.0,
             duplicates: 0.0,
             max_interpenetration: fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE,
@@ -553,6 +557,7 @@ impl DaemonConfig {
             ("estimator.verify_min_inliers", e.verify_min_inliers),
             ("estimator.verify_min_depth_support", e.verify_min_depth_support),
             ("estimator.verify_max_plane_continuation", e.verify_max_plane_continuation),
+            ("estimator.verify_max_depth_continuity", e.verify_max_depth_continuity),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(invalid(key, v, "must be in 0..=1"));

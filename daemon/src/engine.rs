@@ -135,6 +135,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
                 min_inlier_fraction: config.verify_min_inliers,
                 min_depth_support: config.verify_min_depth_support,
                 max_plane_continuation: config.verify_max_plane_continuation,
+                max_depth_continuity: config.verify_max_depth_continuity,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));

@@ -70,6 +70,10 @@ pub struct VerifyConfig {
     /// every pose of it fails. Objects thinner than the depth tolerance
     /// cannot be told from such markings.
     pub max_plane_continuation: f32,
+    /// A mask whose measured surface goes on smoothly past more than this
+    /// share of its border (any shape: a table's edge, a wall's corner) has
+    /// no object standing out of it: every pose of it fails. 1 = off.
+    pub max_depth_continuity: f32,
 }
 
 impl Default for VerifyConfig {
@@ -86,6 +90,7 @@ impl Default for VerifyConfig {
             max_residual_m: 0.02,
             min_depth_support: 0.6,
             max_plane_continuation: 0.5,
+            max_depth_continuity: 0.8,
         }
     }
 }
@@ -114,6 +119,9 @@ pub struct Verification {
     /// Share of the border samples of a flat mask lying on the mask's plane
     /// ([`VerifyConfig::max_plane_continuation`]); 0 when the mask is not flat.
     pub plane_continuation: f32,
+    /// Share of the mask's border samples where the depth goes on smoothly
+    /// past it ([`VerifyConfig::max_depth_continuity`]).
+    pub depth_continuity: f32,
     /// Samples judged (inliers + outliers).
     pub judged_cells: u32,
     /// Whether the pose passed [`VerifyConfig::min_inlier_fraction`],
@@ -293,6 +301,7 @@ impl Verifier {
         // model's judged samples off the patch's plane.
         let flat = plane.flat_plane(FLAT_RMS_M);
         let plane_continuation = flat.map_or(0.0, |(n, d)| plane_continuation(frame, mask, n, d));
+        let depth_continuity = depth_continuity(frame, mask);
         let off_plane = match flat {
             Some((n, d)) if judged > 0 => {
                 let off = samples
@@ -327,7 +336,8 @@ impl Verifier {
             && depth_residual_m.is_finite()
             && depth_residual_m <= cfg.max_residual_m
             && depth_support >= cfg.min_depth_support
-            && plane_continuation <= cfg.max_plane_continuation;
+            && plane_continuation <= cfg.max_plane_continuation
+            && depth_continuity <= cfg.max_depth_continuity;
         Verification {
             fit,
             depth_residual_m,
@@ -337,6 +347,7 @@ impl Verifier {
             off_plane,
             depth_support,
             plane_continuation,
+            depth_continuity,
             judged_cells: judged,
             passed,
         }
@@ -371,41 +382,42 @@ fn surface_near(frame: &FrameView<'_>, u: usize, v: usize, w: usize, h: usize, r
         .any(|&d| DIRS.iter().any(|&(dx, dy)| near(u as f32 + dx * d + 0.5, v as f32 + dy * d + 0.5)))
 }
 
-/// Border samples of [`plane_continuation`] per side of the mask's box.
+/// Border samples of [`border_probes`] per side of the mask's box.
 const BORDER_LINES: usize = 32;
 /// How far outside the mask a border sample is taken (metres, projected at its depth).
 const BORDER_STEP_M: f32 = 0.012;
 
-/// Share of the mask's border samples that lie on the plane `n·x = d`: on
-/// `BORDER_LINES` rows and columns of the mask's box, the pixels a little
-/// beyond the first and last mask pixel (left / right, top / bottom). Border
-/// samples without depth are left out; 0 when there are none.
-fn plane_continuation(frame: &FrameView<'_>, mask: MaskRef<'_>, n: [f32; 3], d: f32) -> f32 {
+/// One border sample of a mask: the depth at the mask's edge, the pixel a
+/// little outside it (not in the mask) and the pixel as far inside (in the
+/// mask, when it is), as pixel indices.
+struct BorderProbe {
+    z_edge: f32,
+    outside: usize,
+    inside: Option<usize>,
+}
+
+/// Calls `f` for the border samples of `mask`: on `BORDER_LINES` rows and
+/// columns of its box, beyond the first and last mask pixel (left / right,
+/// top / bottom), `BORDER_STEP_M` (projected) away. Edges without depth and
+/// samples off the image or back in the mask are left out.
+fn border_probes(frame: &FrameView<'_>, mask: MaskRef<'_>, mut f: impl FnMut(BorderProbe)) {
     let (w, h) = (frame.width(), frame.height());
-    let k = &frame.intrinsics;
-    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    let fx = frame.intrinsics.fx as f32;
     let [u0, v0, u1, v1] = mask.bbox.map(|v| v as usize);
     if u1 >= w || v1 >= h || u1 < u0 || v1 < v0 {
-        return 0.0;
+        return;
     }
     let inside = |u: usize, v: usize| mask.ids[v * w + u] == mask.id;
-    let (mut on, mut all) = (0u32, 0u32);
-    // The sample `step` pixels past the mask pixel (u, v) in direction (du, dv).
+    let at = |u: isize, v: isize| {
+        (u >= 0 && v >= 0 && u < w as isize && v < h as isize).then(|| v as usize * w + u as usize)
+    };
     let mut probe = |u: usize, v: usize, du: isize, dv: isize| {
         let Some(z_edge) = frame.depth.metres(v * w + u) else { return };
         let step = (BORDER_STEP_M * fx / z_edge).clamp(3.0, 24.0) as isize;
-        let (pu, pv) = (u as isize + du * step, v as isize + dv * step);
-        if pu < 0 || pv < 0 || pu >= w as isize || pv >= h as isize {
-            return;
-        }
-        let (pu, pv) = (pu as usize, pv as usize);
-        if inside(pu, pv) {
-            return;
-        }
-        let Some(z) = frame.depth.metres(pv * w + pu) else { return };
-        let x = [(pu as f32 - cx) / fx * z, (pv as f32 - cy) / fy * z, z];
-        all += 1;
-        on += ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() <= OFF_PLANE_M / 2.0) as u32;
+        let (u, v) = (u as isize, v as isize);
+        let Some(outside) = at(u + du * step, v + dv * step).filter(|&p| mask.ids[p] != mask.id) else { return };
+        let inside = at(u - du * step, v - dv * step).filter(|&p| mask.ids[p] == mask.id);
+        f(BorderProbe { z_edge, outside, inside });
     };
     for i in 0..BORDER_LINES {
         let v = v0 + (v1 - v0) * (2 * i + 1) / (2 * BORDER_LINES);
@@ -419,7 +431,41 @@ fn plane_continuation(frame: &FrameView<'_>, mask: MaskRef<'_>, n: [f32; 3], d: 
             probe(u, b, 0, 1);
         }
     }
+}
+
+/// Share of the mask's border samples ([`border_probes`], outside pixels
+/// with depth) that lie on the plane `n·x = d`; 0 when there are none.
+fn plane_continuation(frame: &FrameView<'_>, mask: MaskRef<'_>, n: [f32; 3], d: f32) -> f32 {
+    let w = frame.width();
+    let k = &frame.intrinsics;
+    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    let (mut on, mut all) = (0u32, 0u32);
+    border_probes(frame, mask, |b| {
+        let Some(z) = frame.depth.metres(b.outside) else { return };
+        let (pu, pv) = ((b.outside % w) as f32, (b.outside / w) as f32);
+        let x = [(pu - cx) / fx * z, (pv - cy) / fy * z, z];
+        all += 1;
+        on += ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() <= OFF_PLANE_M / 2.0) as u32;
+    });
     if all == 0 { 0.0 } else { on as f32 / all as f32 }
+}
+
+/// Share of the mask's border samples where the measured surface goes on
+/// smoothly past the border: the depth outside within `1 cm + 1 %` of the
+/// straight continuation of the depth inside through the edge. Any surface
+/// shape, not only planes (a table's edge, a wall corner); 0 when none.
+fn depth_continuity(frame: &FrameView<'_>, mask: MaskRef<'_>) -> f32 {
+    let (mut smooth, mut all) = (0u32, 0u32);
+    border_probes(frame, mask, |b| {
+        let (Some(z_out), Some(z_in)) = (frame.depth.metres(b.outside), b.inside.and_then(|p| frame.depth.metres(p)))
+        else {
+            return;
+        };
+        let predicted = 2.0 * b.z_edge - z_in;
+        all += 1;
+        smooth += ((z_out - predicted).abs() <= 0.01 + 0.01 * b.z_edge) as u32;
+    });
+    if all == 0 { 0.0 } else { smooth as f32 / all as f32 }
 }
 
 /// A measured patch whose points lie within this RMS distance of one plane is flat (metres).

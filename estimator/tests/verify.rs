@@ -205,9 +205,14 @@ fn a_box_face_flush_with_a_table_patch_fails_on_its_border() {
         let v = verifier.verify(&frame, mask(&ws, 0), &pose_of(block, 0, &ws, &ghost));
         assert!(v.plane_continuation > 0.9, "the table goes on past the patch on every side: {v:?}");
         assert!(!v.passed, "a box face flush with the table passed: {v:?}");
-        // The same pose with the border check off: the other terms accept it,
-        // so the border is what refuses it.
-        let lenient = Verifier::new(&set, VerifyConfig { max_plane_continuation: 1.0, ..VerifyConfig::default() })
+        // The shape-free border check alone refuses it too (the depth goes on
+        // smoothly past the patch) ...
+        let no_plane = VerifyConfig { max_plane_continuation: 1.0, ..VerifyConfig::default() };
+        let v2 = Verifier::new(&set, no_plane).verify(&frame, mask(&ws, 0), &pose_of(block, 0, &ws, &ghost));
+        assert!(v2.depth_continuity > 0.8 && !v2.passed, "{v2:?}");
+        // ... and with both border checks off the other terms accept it, so
+        // the border is what refuses it.
+        let lenient = Verifier::new(&set, VerifyConfig { max_depth_continuity: 1.0, ..no_plane })
             .verify(&frame, mask(&ws, 0), &pose_of(block, 0, &ws, &ghost));
         assert!(lenient.off_plane < 0.3, "its visible samples lie on the table: {lenient:?}");
         tried += 1;
