@@ -212,8 +212,11 @@ fn a_box_face_flush_with_a_table_patch_fails_on_its_border() {
         assert!(v2.depth_continuity > 0.8 && !v2.passed, "{v2:?}");
         // ... and with both border checks off the other terms accept it, so
         // the border is what refuses it.
-        let lenient = Verifier::new(&set, VerifyConfig { max_depth_continuity: 1.0, ..no_plane })
-            .verify(&frame, mask(&ws, 0), &pose_of(block, 0, &ws, &ghost));
+        let lenient = Verifier::new(&set, VerifyConfig { max_depth_continuity: 1.0, ..no_plane }).verify(
+            &frame,
+            mask(&ws, 0),
+            &pose_of(block, 0, &ws, &ghost),
+        );
         assert!(lenient.off_plane < 0.3, "its visible samples lie on the table: {lenient:?}");
         tried += 1;
     }
