@@ -689,8 +689,7 @@ impl Runner {
         let mut dropped = Vec::new();
         self.duplicates +=
             fusepose_estimator::duplicates::suppress(&mut self.poses, &self.separations, &self.scores, &mut dropped);
-        let mut it = dropped.iter();
-        self.scores.retain(|_| !it.next().copied().unwrap_or(false));
+        fusepose_estimator::poses::remove_marked(&mut self.scores, &dropped);
     }
 
     /// Drops the pose more inside another ([`fusepose_estimator::interpenetration`]), as the daemon.
@@ -698,8 +697,7 @@ impl Runner {
         let mut dropped = Vec::new();
         self.interpenetrating +=
             self.solids.suppress(&mut self.poses, self.max_interpenetration, &self.scores, &mut dropped);
-        let mut it = dropped.iter();
-        self.scores.retain(|_| !it.next().copied().unwrap_or(false));
+        fusepose_estimator::poses::remove_marked(&mut self.scores, &dropped);
     }
 
     fn print(&self, dataset: &str, frames: usize) {

@@ -434,8 +434,7 @@ fn rank(poses: &PoseSet, verdicts: &[Verification], scores: &mut Vec<f32>) {
 /// Removes the verdicts of the poses `marks` dropped.
 fn forget_dropped(dropped: usize, verdicts: &mut Vec<Verification>, marks: &[bool]) {
     if dropped > 0 && !verdicts.is_empty() {
-        let mut it = marks.iter();
-        verdicts.retain(|_| !it.next().copied().unwrap_or(false));
+        fusepose_estimator::poses::remove_marked(verdicts, marks);
     }
 }
 
@@ -654,11 +653,6 @@ impl PoseEngine {
     /// Poses the last frame's verification dropped (`estimator.verify = "drop"`).
     pub fn rejected_by_verification(&self) -> usize {
         self.rejected
-    }
-
-    /// Measured time after the estimate per pose (verification, duplicates), ns.
-    pub fn post_estimate_per_pose_ns(&self) -> u64 {
-        self.post_estimate_ns as u64
     }
 
     /// Poses the last frame's verification failed (dropped or published unverified).

@@ -23,6 +23,15 @@ pub struct ObjectPose {
     pub iterations: u16,
 }
 
+/// Removes item `i` of `items` where `dropped[i]` (items beyond `dropped`
+/// stay) and returns how many went: keeps per-pose data (scores, verdicts)
+/// in step with [`PoseSet::remove_marked`]. No allocation.
+pub fn remove_marked<T>(items: &mut Vec<T>, dropped: &[bool]) -> usize {
+    let mut it = dropped.iter();
+    items.retain(|_| !it.next().copied().unwrap_or(false));
+    dropped.iter().filter(|&&d| d).count()
+}
+
 /// The poses of one frame; capacity fixed at construction so filling it never allocates.
 #[derive(Clone, Debug)]
 pub struct PoseSet {
@@ -66,9 +75,7 @@ impl PoseSet {
     /// Removes pose `i` where `dropped[i]` (poses beyond `dropped` stay) and
     /// returns how many went. No allocation.
     pub fn remove_marked(&mut self, dropped: &[bool]) -> usize {
-        let mut it = dropped.iter();
-        self.poses.retain(|_| !it.next().copied().unwrap_or(false));
-        dropped.iter().filter(|&&d| d).count()
+        remove_marked(&mut self.poses, dropped)
     }
 
     pub fn as_slice(&self) -> &[ObjectPose] {

@@ -300,8 +300,7 @@ impl Verifier {
         // visible surface is not flat there is no object: the share of the
         // model's judged samples off the patch's plane.
         let flat = plane.flat_plane(FLAT_RMS_M);
-        let plane_continuation = flat.map_or(0.0, |(n, d)| plane_continuation(frame, mask, n, d));
-        let depth_continuity = depth_continuity(frame, mask);
+        let (plane_continuation, depth_continuity) = border_continuation(frame, mask, flat);
         let off_plane = match flat {
             Some((n, d)) if judged > 0 => {
                 let off = samples
@@ -433,39 +432,37 @@ fn border_probes(frame: &FrameView<'_>, mask: MaskRef<'_>, mut f: impl FnMut(Bor
     }
 }
 
-/// Share of the mask's border samples ([`border_probes`], outside pixels
-/// with depth) that lie on the plane `n·x = d`; 0 when there are none.
-fn plane_continuation(frame: &FrameView<'_>, mask: MaskRef<'_>, n: [f32; 3], d: f32) -> f32 {
+/// The two border terms in one pass over [`border_probes`]:
+/// - plane continuation: the share of samples (outside pixels with depth)
+///   that lie on `plane` (`n·x = d`), 0 without a plane;
+/// - depth continuity: the share of samples where the measured surface goes
+///   on smoothly past the border — the depth outside within `1 cm + 1 %` of
+///   the straight continuation of the depth inside through the edge, for any
+///   surface shape (a table's edge, a wall corner).
+///
+/// Each is 0 when it has no samples.
+fn border_continuation(frame: &FrameView<'_>, mask: MaskRef<'_>, plane: Option<([f32; 3], f32)>) -> (f32, f32) {
     let w = frame.width();
     let k = &frame.intrinsics;
     let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
-    let (mut on, mut all) = (0u32, 0u32);
+    let (mut on, mut outside) = (0u32, 0u32);
+    let (mut smooth, mut through) = (0u32, 0u32);
     border_probes(frame, mask, |b| {
-        let Some(z) = frame.depth.metres(b.outside) else { return };
-        let (pu, pv) = ((b.outside % w) as f32, (b.outside / w) as f32);
-        let x = [(pu - cx) / fx * z, (pv - cy) / fy * z, z];
-        all += 1;
-        on += ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() <= OFF_PLANE_M / 2.0) as u32;
+        let Some(z_out) = frame.depth.metres(b.outside) else { return };
+        if let Some((n, d)) = plane {
+            let (pu, pv) = ((b.outside % w) as f32, (b.outside / w) as f32);
+            let x = [(pu - cx) / fx * z_out, (pv - cy) / fy * z_out, z_out];
+            outside += 1;
+            on += ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() <= OFF_PLANE_M / 2.0) as u32;
+        }
+        if let Some(z_in) = b.inside.and_then(|p| frame.depth.metres(p)) {
+            let predicted = 2.0 * b.z_edge - z_in;
+            through += 1;
+            smooth += ((z_out - predicted).abs() <= 0.01 + 0.01 * b.z_edge) as u32;
+        }
     });
-    if all == 0 { 0.0 } else { on as f32 / all as f32 }
-}
-
-/// Share of the mask's border samples where the measured surface goes on
-/// smoothly past the border: the depth outside within `1 cm + 1 %` of the
-/// straight continuation of the depth inside through the edge. Any surface
-/// shape, not only planes (a table's edge, a wall corner); 0 when none.
-fn depth_continuity(frame: &FrameView<'_>, mask: MaskRef<'_>) -> f32 {
-    let (mut smooth, mut all) = (0u32, 0u32);
-    border_probes(frame, mask, |b| {
-        let (Some(z_out), Some(z_in)) = (frame.depth.metres(b.outside), b.inside.and_then(|p| frame.depth.metres(p)))
-        else {
-            return;
-        };
-        let predicted = 2.0 * b.z_edge - z_in;
-        all += 1;
-        smooth += ((z_out - predicted).abs() <= 0.01 + 0.01 * b.z_edge) as u32;
-    });
-    if all == 0 { 0.0 } else { smooth as f32 / all as f32 }
+    let share = |n: u32, of: u32| if of == 0 { 0.0 } else { n as f32 / of as f32 };
+    (share(on, outside), share(smooth, through))
 }
 
 /// A measured patch whose points lie within this RMS distance of one plane is flat (metres).
