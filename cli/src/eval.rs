@@ -172,6 +172,11 @@ pub struct Args {
     /// as the daemon's `estimator.join_parts`.
     #[arg(long, default_value_t = 1.0)]
     pub join_parts: f32,
+    /// Cut a region of one class whose points do not fit inside one object
+    /// (FACTOR × its diameter) into the fewest pieces that each do: touching
+    /// copies of one object (0 = off), as the daemon's `estimator.split_regions`.
+    #[arg(long, default_value_t = 1.0)]
+    pub split_regions: f32,
     /// One object, not two: segmenter instances of a class whose centres are
     /// within FACTOR × the object's smallest side become one, and a pose that
     /// close to a better pose of its class is dropped (0 = off), as the
@@ -395,6 +400,8 @@ struct Runner {
     unmatched: usize,
     /// Regions joined into another of their class (`--join-parts`).
     joined: usize,
+    /// Instances added by cutting regions (`--split-regions`).
+    split: usize,
     /// Instance regions against the ground-truth instance masks.
     instance_counts: instances::InstanceCounts,
     /// Pose verification (`--verify`): the checker, whether failures are dropped,
@@ -448,6 +455,7 @@ impl Runner {
         };
         let mut workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
         workspace.join_parts(&fusepose_estimator::parts::extents(objects, args.join_parts));
+        workspace.split_regions(&fusepose_estimator::parts::extents(objects, args.split_regions));
         let csv = match &args.csv {
             None => None,
             Some(path) => {
@@ -480,6 +488,7 @@ impl Runner {
             refused: BTreeMap::new(),
             unmatched: 0,
             joined: 0,
+            split: 0,
             instance_counts: instances::InstanceCounts::default(),
             verifier: (args.verify != "off").then(|| {
                 let d = VerifyConfig::default();
@@ -528,6 +537,7 @@ impl Runner {
         let prepared = self.workspace.prepare(&view, seed);
         let prepared_ok = prepared.is_ok();
         self.joined += self.workspace.stats().joined_parts as usize;
+        self.split += self.workspace.stats().split_regions as usize;
         let estimated = match prepared {
             Ok(_) => self.estimator.estimate(&view, &mut self.workspace, &mut self.poses).map(|_| ()),
             Err(e) => Err(e.into()),
@@ -763,6 +773,7 @@ impl Runner {
             o.insert("frames_refused".into(), self.refused.values().sum::<usize>().into());
             o.insert("unmatched_estimates".into(), self.unmatched.into());
             o.insert("joined_parts".into(), self.joined.into());
+            o.insert("split_regions".into(), self.split.into());
             o.insert("duplicates_dropped".into(), self.duplicates.into());
             o.insert("interpenetrating_dropped".into(), self.interpenetrating.into());
             if self.instance_counts.truth > 0 {

@@ -203,6 +203,10 @@ pub struct EstimatorConfig {
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
     pub join_parts: f32,
+    /// Several copies, not one: a region of one class whose points do not
+    /// fit inside one object (this factor × its diameter) is cut into the
+    /// fewest pieces that each do (`fusepose_estimator::split`). 0 = off.
+    pub split_regions: f32,
     /// One object, not two: segmenter instances of a class whose 3D centres
     /// lie within this factor × the object's smallest side become one, and a
     /// pose that close to a better-fitting pose of its class is dropped
@@ -324,6 +328,7 @@ impl Default for EstimatorConfig {
             verify_max_plane_continuation: fusepose_estimator::verify::VerifyConfig::default().max_plane_continuation,
             verify_max_depth_continuity: fusepose_estimator::verify::VerifyConfig::default().max_depth_continuity,
             join_parts: 1.0,
+            split_regions: 1.0,
             duplicates: 0.0,
             max_interpenetration: fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
@@ -525,6 +530,9 @@ impl DaemonConfig {
         if !(e.join_parts.is_finite() && (0.0..=4.0).contains(&e.join_parts)) {
             return Err(invalid("estimator.join_parts", e.join_parts, "must be in 0..=4 (0 = off)"));
         }
+        if !(e.split_regions.is_finite() && (e.split_regions == 0.0 || (0.5..=4.0).contains(&e.split_regions))) {
+            return Err(invalid("estimator.split_regions", e.split_regions, "must be 0 (off) or in 0.5..=4"));
+        }
         if !(e.max_interpenetration.is_finite() && (0.05..=1.0).contains(&e.max_interpenetration)) {
             return Err(invalid(
                 "estimator.max_interpenetration",
@@ -671,6 +679,9 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\njoin_parts = -1.0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.join_parts"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\njoin_parts = 0\n").unwrap().estimator.join_parts, 0.0);
+        let err = DaemonConfig::parse("[estimator]\nsplit_regions = 0.2\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.split_regions"), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\nsplit_regions = 0\n").unwrap().estimator.split_regions, 0.0);
         let err = DaemonConfig::parse("[estimator]\nduplicates = 3\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.duplicates") && err.contains("0..=2"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\nduplicates = 0.5\n").unwrap().estimator.duplicates, 0.5);

@@ -41,6 +41,10 @@ pub struct EngineSpec {
     /// many metres of each other are one instance (`estimator.join_parts`);
     /// empty = never join.
     pub part_extents: Vec<f32>,
+    /// Per class (id − 1): a region of the class whose points do not fit
+    /// within this many metres is cut into copies (`estimator.split_regions`);
+    /// empty = never split.
+    pub split_extents: Vec<f32>,
     /// Per-class distance under which two instances or poses are one object
     /// (`estimator.duplicates`); empty = off.
     pub separations: Vec<f32>,
@@ -141,6 +145,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
         }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
+        spec.split_extents = fusepose_estimator::parts::extents(&objects, config.split_regions);
         spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
         if config.max_interpenetration < 1.0 {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
@@ -182,6 +187,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
+            split_extents: Vec::new(),
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
@@ -201,6 +207,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
+            split_extents: Vec::new(),
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
@@ -286,6 +293,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         min_confidence: 0.0,
         verify: None,
         part_extents: Vec::new(),
+        split_extents: Vec::new(),
         separations: Vec::new(),
         interpenetration: None,
         seg_boundary: Boundary::default(),
@@ -455,6 +463,7 @@ impl PoseEngine {
             Some(_) => {
                 let mut ws = Workspace::new(workspace_config).map_err(|e| anyhow::anyhow!("estimator: {e}"))?;
                 ws.join_parts(&spec.part_extents);
+                ws.split_regions(&spec.split_extents);
                 Some(ws)
             }
             None => None,

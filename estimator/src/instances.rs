@@ -41,6 +41,9 @@ pub struct Component {
     pub bbox: [u16; 4],
 }
 
+/// Most pieces [`InstanceFinder::split`] cuts one component into.
+pub const MAX_PIECES: usize = 8;
+
 /// Limits applied while finding instances.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub struct InstanceLimits {
@@ -91,6 +94,8 @@ pub struct InstanceFinder {
     width: usize,
     height: usize,
     stats: LabelStats,
+    /// Smallest component id not yet used in this frame (class planes).
+    next_id: u32,
 }
 
 impl InstanceFinder {
@@ -134,10 +139,11 @@ impl InstanceFinder {
             self.stack.reserve(n - self.stack.len());
         }
         if let LabelPlane::Instances { ids, classes } = labels {
+            self.next_id = classes.len().max(1) as u32;
             self.find_instances(ids, classes, limits);
             return &self.kept;
         }
-        let mut next_id: u32 = 1;
+        self.next_id = 1;
         for start in 0..n {
             let class_id = labels.class_at(start);
             if class_id == 0 || self.ids[start] != 0 {
@@ -148,8 +154,8 @@ impl InstanceFinder {
                 self.stats.max_unknown_class = self.stats.max_unknown_class.max(class_id);
                 continue;
             }
-            let component = self.flood_fill(labels, start, class_id, next_id);
-            next_id += 1;
+            let component = self.flood_fill(labels, start, class_id, self.next_id);
+            self.next_id += 1;
             self.offer(component, limits);
         }
         &self.kept
@@ -247,6 +253,56 @@ impl InstanceFinder {
         // Unstable sort does not allocate; the key makes the order total.
         self.kept.sort_unstable_by_key(|c| (std::cmp::Reverse(c.pixels), c.component_id));
         true
+    }
+
+    /// Splits kept component `id` into pieces: `piece_of(pixel index)` names
+    /// the piece (0..[`MAX_PIECES`]) of each of its pixels, or `None` for a
+    /// pixel that leaves the component (it becomes background). Piece 0 keeps the
+    /// id; every other non-empty piece gets a new id and joins the kept list
+    /// like a component of [`find`](Self::find) (pieces under `min_pixels`
+    /// are dropped and counted, the `max_instances` largest are kept).
+    /// Returns the number of new instances kept; 0, changing nothing, when
+    /// `id` is not kept. Never allocates within the capacity `find` reserved.
+    pub fn split(
+        &mut self,
+        id: u32,
+        limits: InstanceLimits,
+        mut piece_of: impl FnMut(usize) -> Option<usize>,
+    ) -> usize {
+        let Some(at) = self.kept.iter().position(|c| c.component_id == id) else {
+            return 0;
+        };
+        let whole = self.kept.remove(at);
+        let mut tallies = [Tally::EMPTY; MAX_PIECES];
+        let first_new = self.next_id;
+        let [u0, v0, u1, v1] = whole.bbox.map(|x| x as usize);
+        let (w, h) = (self.width, self.height);
+        for v in v0..=v1.min(h.saturating_sub(1)) {
+            for u in u0..=u1.min(w.saturating_sub(1)) {
+                let p = v * w + u;
+                if self.ids[p] != id {
+                    continue;
+                }
+                let Some(k) = piece_of(p).map(|k| k.min(MAX_PIECES - 1)) else {
+                    self.ids[p] = 0;
+                    continue;
+                };
+                if k > 0 {
+                    self.ids[p] = first_new + k as u32 - 1;
+                }
+                let t = &mut tallies[k];
+                let (u, v) = (u as u16, v as u16);
+                t.pixels += 1;
+                t.bbox = [t.bbox[0].min(u), t.bbox[1].min(v), t.bbox[2].max(u), t.bbox[3].max(v)];
+            }
+        }
+        self.next_id += MAX_PIECES as u32 - 1;
+        for (k, t) in tallies.iter().enumerate().filter(|(_, t)| t.pixels > 0) {
+            let component_id = if k == 0 { id } else { first_new + k as u32 - 1 };
+            self.offer(Component { class_id: whole.class_id, component_id, pixels: t.pixels, bbox: t.bbox }, limits);
+        }
+        let new = first_new..self.next_id;
+        self.kept.iter().filter(|c| new.contains(&c.component_id)).count()
     }
 
     fn flood_fill(&mut self, labels: &LabelPlane<'_>, start: usize, class_id: u16, id: u32) -> Component {

@@ -20,6 +20,7 @@ pub mod parts;
 pub mod poses;
 pub mod sampling;
 pub mod seg;
+pub mod split;
 pub mod tracking;
 pub mod verify;
 pub mod workspace;

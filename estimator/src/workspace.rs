@@ -19,6 +19,7 @@ use crate::frame::{FrameError, FrameView, LabelPlane};
 use crate::instances::{Component, InstanceFinder, InstanceLimits, LabelStats};
 use crate::parts::PartJoiner;
 use crate::sampling;
+use crate::split::RegionSplitter;
 
 /// Sizes fixed at start-up; buffers are allocated once from them.
 ///
@@ -102,6 +103,9 @@ pub struct PrepareStats {
     /// Regions joined into another region of their class as pieces of one
     /// object (see [`Workspace::join_parts`]).
     pub joined_parts: u32,
+    /// Instances added by cutting regions that hold several objects of their
+    /// class (see [`Workspace::split_regions`]).
+    pub split_regions: u32,
 }
 
 /// All per-frame buffers. Instance `i` owns row `i` of each array; rows at and
@@ -123,6 +127,8 @@ pub struct Workspace {
     picked: Vec<u32>,
     /// Joins same-class pieces of one object; `None` keeps every region.
     joiner: Option<PartJoiner>,
+    /// Cuts same-class regions that hold several objects; `None` keeps every region.
+    splitter: Option<RegionSplitter>,
     stats: PrepareStats,
 }
 
@@ -152,6 +158,7 @@ impl Workspace {
             candidates: Vec::new(),
             picked: vec![0; n],
             joiner: None,
+            splitter: None,
             stats: PrepareStats::default(),
         })
     }
@@ -181,6 +188,9 @@ impl Workspace {
         if let Some(joiner) = self.joiner.as_mut().filter(|_| !labels.is_instances()) {
             self.stats.joined_parts = joiner.join(&mut self.finder, frame);
         }
+        if let Some(splitter) = self.splitter.as_mut().filter(|_| !labels.is_instances()) {
+            self.stats.split_regions = splitter.split(&mut self.finder, frame, limits);
+        }
         if self.candidates.capacity() < w * h {
             self.candidates.reserve(w * h - self.candidates.len());
         }
@@ -201,6 +211,15 @@ impl Workspace {
     /// Allocates; call it at start-up, not per frame.
     pub fn join_parts(&mut self, extents: &[f32]) {
         self.joiner = (!extents.is_empty()).then(|| PartJoiner::new(extents, self.config.max_instances));
+    }
+
+    /// From the next frame on, cuts a region of one class of a class plane
+    /// whose points do not fit inside one object into the fewest pieces that
+    /// each do (see [`crate::split`]; instance planes are never cut):
+    /// `extents[k]` as for [`join_parts`](Self::join_parts). An empty slice
+    /// turns splitting off. Allocates; call it at start-up, not per frame.
+    pub fn split_regions(&mut self, extents: &[f32]) {
+        self.splitter = (!extents.is_empty()).then(|| RegionSplitter::new(extents, self.config.max_instances));
     }
 
     /// What the last [`prepare`](Self::prepare) skipped.

@@ -1,5 +1,6 @@
-//! After a warm-up frame, `Workspace::prepare` and the ICP estimator's
-//! `estimate` perform no heap allocation on further frames of the same size.
+//! After a warm-up frame, `Workspace::prepare` (joining pieces and cutting
+//! regions of several copies included) and the ICP estimator's `estimate`
+//! perform no heap allocation on further frames of the same size.
 //!
 //! A counting global allocator counts allocations made on the test's own
 //! thread while counting is switched on (other test threads don't interfere).
@@ -74,6 +75,7 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
     let mut ws = Workspace::new(WorkspaceConfig { num_classes: 2, ..Default::default() }).unwrap();
     ws.join_parts(&fusepose_estimator::parts::extents(&objects, 1.0));
+    ws.split_regions(&fusepose_estimator::parts::extents(&objects, 1.0));
     let mut out = PoseSet::with_capacity(8);
 
     let warm = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [-0.05, 0.0, 0.5]))]);
@@ -88,6 +90,12 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
         ]),
         render(&[(2, &s, pose([0.0, 0.0, 1.0], 45.0, [0.0, 0.0, 0.4]))]),
         split(render(&[(1, &l, pose([0.0, 1.0, 0.0], 20.0, [0.0, 0.0, 0.5]))])),
+        // Two L blocks side by side, touching: one class-1 region of two
+        // objects (painted alike, as copies are).
+        painted(render(&[
+            (1, &l, pose([0.0, 0.0, 1.0], 10.0, [-0.04, 0.0, 0.5])),
+            (1, &l, pose([0.0, 0.0, 1.0], 10.0, [0.04, 0.0, 0.5])),
+        ])),
     ];
     for (i, frame) in frames.iter().enumerate() {
         let view = frame.view();
@@ -102,7 +110,25 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
         if i == 2 {
             assert_eq!((prepared, ws.stats().joined_parts), (1, 1), "the split object is one instance");
         }
+        if i == 3 {
+            assert_eq!((prepared, ws.stats().split_regions), (2, 1), "the touching pair is two instances");
+            for pose in out.as_slice() {
+                let x = pose.translation.x;
+                assert!((x.abs() - 0.04).abs() < 0.02, "a pose between the pair: x = {x:.3} m");
+            }
+        }
     }
+}
+
+/// Every labelled pixel one colour (the synthetic frames' colours follow the
+/// pixel position, which would make two copies look like two objects).
+fn painted(mut frame: common::SyntheticFrame) -> common::SyntheticFrame {
+    for (p, &l) in frame.labels.iter().enumerate() {
+        if l != 0 {
+            frame.color[p * 3..p * 3 + 3].copy_from_slice(&[150, 110, 60]);
+        }
+    }
+    frame
 }
 
 /// Clears the labels of a 3-pixel-wide column through the middle of the

@@ -191,12 +191,15 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
     // prepare; here prepare runs either way, for coverage, and the two must agree.
     let content = view.check_content(config.num_classes);
     let mut ws = Workspace::new(config).expect("fixed config is valid");
-    // Joining same-class pieces runs too (as in the daemon): 25 cm objects.
+    // Joining same-class pieces and cutting regions of several copies run
+    // too (as in the daemon): 25 cm objects.
     ws.join_parts(&[0.25; 5]);
+    ws.split_regions(&[0.25; 5]);
     let result = ws.prepare(&view, header.sequence);
     check_workspace(&ws, &view, &result);
     if view.labels.is_some_and(|l| l.is_instances()) {
         assert_eq!(ws.stats().joined_parts, 0, "an instance plane's instances were joined");
+        assert_eq!(ws.stats().split_regions, 0, "an instance plane's instances were cut");
     }
     match &content {
         Err(FrameError::DepthEmpty | FrameError::DepthNonFinite { .. }) => {
