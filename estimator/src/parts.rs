@@ -32,15 +32,30 @@ pub fn extents(objects: &ObjectSet, factor: f32) -> Vec<f32> {
     objects.objects.iter().map(|o| (o.diameter * factor as f64) as f32).collect()
 }
 
+/// Per-class extents (index = class id − 1), metres: the largest distance
+/// between two points of one object. Non-finite or non-positive entries,
+/// and classes past the table, read as 0 (never join or cut that class).
+#[derive(Clone, Debug, Default)]
+pub struct ClassExtents(Vec<f32>);
+
+impl ClassExtents {
+    pub fn new(extents: &[f32]) -> Self {
+        Self(extents.iter().map(|&e| if e.is_finite() && e > 0.0 { e } else { 0.0 }).collect())
+    }
+
+    /// The extent of class id `class` (0 when it has none).
+    pub fn of(&self, class: u16) -> f32 {
+        (class as usize).checked_sub(1).and_then(|k| self.0.get(k)).copied().unwrap_or(0.0)
+    }
+}
+
 /// Points per region used by the fit test.
 pub const SAMPLES: usize = 64;
 
 /// Joins same-class regions that fit inside one object; see the module doc.
 #[derive(Debug)]
 pub struct PartJoiner {
-    /// Per class (index = class id − 1): largest distance, metres, between
-    /// two points of one object; 0 never joins that class.
-    extents: Vec<f32>,
+    extents: ClassExtents,
     /// [max_instances × SAMPLES] points, camera frame, metres.
     samples: Vec<[f32; 3]>,
     /// Sampled points per region.
@@ -57,7 +72,7 @@ impl PartJoiner {
     /// a slack for depth noise). Non-finite or negative extents never join.
     pub fn new(extents: &[f32], max_instances: usize) -> Self {
         Self {
-            extents: extents.iter().map(|&e| if e.is_finite() && e > 0.0 { e } else { 0.0 }).collect(),
+            extents: ClassExtents::new(extents),
             samples: vec![[0.0; 3]; max_instances * SAMPLES],
             counts: vec![0; max_instances],
             root: vec![0; max_instances],
@@ -79,7 +94,7 @@ impl PartJoiner {
         // Only classes with an extent and more than one region need points.
         for k in 0..n {
             let (_, class) = self.ids[k];
-            if self.extent(class) > 0.0 && self.ids[..n].iter().filter(|(_, c)| *c == class).count() > 1 {
+            if self.extents.of(class) > 0.0 && self.ids[..n].iter().filter(|(_, c)| *c == class).count() > 1 {
                 self.sample(finder, k, frame);
             }
         }
@@ -89,7 +104,7 @@ impl PartJoiner {
                 continue;
             }
             let (_, class) = self.ids[i];
-            let extent = self.extent(class);
+            let extent = self.extents.of(class);
             if extent <= 0.0 {
                 continue;
             }
@@ -111,10 +126,6 @@ impl PartJoiner {
             }
         }
         joined
-    }
-
-    fn extent(&self, class: u16) -> f32 {
-        (class as usize).checked_sub(1).and_then(|k| self.extents.get(k)).copied().unwrap_or(0.0)
     }
 
     /// Whether every sampled point of region `a` is within `extent` of every one of `b`.

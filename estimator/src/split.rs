@@ -33,6 +33,7 @@
 
 use crate::frame::FrameView;
 use crate::instances::{InstanceFinder, InstanceLimits, MAX_PIECES};
+use crate::parts::ClassExtents;
 use crate::sampling::back_project;
 
 /// Points per region used by the test and the clustering.
@@ -47,9 +48,7 @@ pub const REFINE_PIXELS: usize = 4096;
 /// Cuts same-class regions that hold several objects; see the module doc.
 #[derive(Debug)]
 pub struct RegionSplitter {
-    /// Per class (index = class id − 1): largest distance, metres, between
-    /// two points of one object; 0 never splits that class.
-    extents: Vec<f32>,
+    extents: ClassExtents,
     /// Sampled points of the region being tested, camera frame, metres.
     samples: Vec<[f32; 3]>,
     /// Depths of the region's valid pixels at the sampling stride (for the median).
@@ -70,7 +69,7 @@ impl RegionSplitter {
     /// a slack for depth noise). Non-finite or non-positive extents never split.
     pub fn new(extents: &[f32], max_instances: usize) -> Self {
         Self {
-            extents: extents.iter().map(|&e| if e.is_finite() && e > 0.0 { e } else { 0.0 }).collect(),
+            extents: ClassExtents::new(extents),
             samples: Vec::with_capacity(SAMPLES),
             depths: Vec::with_capacity(SAMPLES),
             cluster: vec![0; SAMPLES],
@@ -94,7 +93,7 @@ impl RegionSplitter {
         let mut added = 0;
         for r in 0..self.regions.len() {
             let (id, class) = self.regions[r];
-            let extent = self.extent(class);
+            let extent = self.extents.of(class);
             if extent <= 0.0 {
                 continue;
             }
@@ -122,10 +121,6 @@ impl RegionSplitter {
             added += finder.split(id, limits, |p| Some(piece(p))) as u32;
         }
         added
-    }
-
-    fn extent(&self, class: u16) -> f32 {
-        (class as usize).checked_sub(1).and_then(|k| self.extents.get(k)).copied().unwrap_or(0.0)
     }
 
     /// Samples up to [`SAMPLES`] valid-depth points of region `id`, one per
