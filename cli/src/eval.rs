@@ -455,7 +455,10 @@ impl Runner {
         };
         let mut workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
         workspace.join_parts(&fusepose_estimator::parts::extents(objects, args.join_parts));
-        workspace.split_regions(&fusepose_estimator::parts::extents(objects, args.split_regions));
+        workspace.split_regions(
+            &fusepose_estimator::parts::extents(objects, args.split_regions),
+            &fusepose_estimator::split::silhouette_areas(objects),
+        );
         let csv = match &args.csv {
             None => None,
             Some(path) => {

@@ -45,6 +45,9 @@ pub struct EngineSpec {
     /// within this many metres is cut into copies (`estimator.split_regions`);
     /// empty = never split.
     pub split_extents: Vec<f32>,
+    /// Per class (id − 1): the object's largest silhouette area, m²
+    /// (`fusepose_estimator::split::silhouette_areas`).
+    pub split_areas: Vec<f32>,
     /// Per-class distance under which two instances or poses are one object
     /// (`estimator.duplicates`); empty = off.
     pub separations: Vec<f32>,
@@ -146,6 +149,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.split_extents = fusepose_estimator::parts::extents(&objects, config.split_regions);
+        spec.split_areas = fusepose_estimator::split::silhouette_areas(&objects);
         spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
         if config.max_interpenetration < 1.0 {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
@@ -188,6 +192,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             verify: None,
             part_extents: Vec::new(),
             split_extents: Vec::new(),
+            split_areas: Vec::new(),
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
@@ -208,6 +213,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             verify: None,
             part_extents: Vec::new(),
             split_extents: Vec::new(),
+            split_areas: Vec::new(),
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
@@ -294,6 +300,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         verify: None,
         part_extents: Vec::new(),
         split_extents: Vec::new(),
+        split_areas: Vec::new(),
         separations: Vec::new(),
         interpenetration: None,
         seg_boundary: Boundary::default(),
@@ -463,7 +470,7 @@ impl PoseEngine {
             Some(_) => {
                 let mut ws = Workspace::new(workspace_config).map_err(|e| anyhow::anyhow!("estimator: {e}"))?;
                 ws.join_parts(&spec.part_extents);
-                ws.split_regions(&spec.split_extents);
+                ws.split_regions(&spec.split_extents, &spec.split_areas);
                 Some(ws)
             }
             None => None,

@@ -27,6 +27,12 @@
 //! where it has depth, else by image distance to the cluster's projected
 //! centre.
 //!
+//! A region also does not fit when its area (its valid-depth pixels at
+//! their depths) exceeds [`AREA_FACTOR`] × the object's largest silhouette
+//! ([`silhouette_areas`]): two boxes side by side along their narrowest
+//! side nearly fit the diameter but cover twice a box's face. Each piece
+//! must then cover at most that area too.
+//!
 //! Instance planes never come here: their instances are the producer's.
 //! Buffers are sized in [`RegionSplitter::new`] and on the first frame of a
 //! size; splitting then never allocates.
@@ -49,6 +55,11 @@ pub const REFINE_PIXELS: usize = 4096;
 #[derive(Debug)]
 pub struct RegionSplitter {
     extents: ClassExtents,
+    /// Per class (id − 1): the largest silhouette area of the object over
+    /// view directions, m² ([`silhouette_areas`]); 0 = no area test.
+    areas: ClassExtents,
+    /// Area of the region being tested (its valid-depth pixels), m².
+    area: f32,
     /// Sampled points of the region being tested, camera frame, metres.
     samples: Vec<[f32; 3]>,
     /// Depths of the region's valid pixels at the sampling stride (for the median).
@@ -67,9 +78,11 @@ impl RegionSplitter {
     /// A splitter for at most `max_instances` regions per frame; `extents[k]`
     /// is the extent of class id k + 1 in metres (an object's diameter, times
     /// a slack for depth noise). Non-finite or non-positive extents never split.
-    pub fn new(extents: &[f32], max_instances: usize) -> Self {
+    pub fn new(extents: &[f32], areas: &[f32], max_instances: usize) -> Self {
         Self {
             extents: ClassExtents::new(extents),
+            areas: ClassExtents::new(areas),
+            area: 0.0,
             samples: Vec::with_capacity(SAMPLES),
             depths: Vec::with_capacity(SAMPLES),
             cluster: vec![0; SAMPLES],
@@ -98,10 +111,13 @@ impl RegionSplitter {
                 continue;
             }
             self.sample(finder, id, frame, extent);
-            if self.samples.len() < 2 * MAX_PIECES || fits(&self.samples, extent) {
+            let max_area = AREA_FACTOR * self.areas.of(class);
+            let too_large = max_area > 0.0 && self.area > max_area;
+            if self.samples.len() < 2 * MAX_PIECES || (!too_large && fits(&self.samples, extent)) {
                 continue;
             }
-            let Some((k, centres)) = self.pieces(extent) else {
+            let max_area = if max_area > 0.0 { max_area } else { f32::INFINITY };
+            let Some((k, centres)) = self.pieces(extent, max_area) else {
                 continue;
             };
             let centres = self.refine(frame, centres, k);
@@ -146,6 +162,9 @@ impl RegionSplitter {
                 }
             }
         }
+        let k = &frame.intrinsics;
+        let per_m2 = 1.0 / (k.fx * k.fy) as f32;
+        self.area = self.pixels.iter().filter_map(|&p| frame.depth.metres(p as usize)).map(|z| z * z * per_m2).sum();
         let count = self.pixels.len();
         let take = count.min(SAMPLES);
         let pick = |i: usize| {
@@ -220,14 +239,17 @@ impl RegionSplitter {
     }
 
     /// The fewest clusters (2..=MAX_PIECES) of the samples that each fit `extent`.
-    fn pieces(&mut self, extent: f32) -> Option<(usize, [[f32; 3]; MAX_PIECES])> {
+    fn pieces(&mut self, extent: f32, max_area: f32) -> Option<(usize, [[f32; 3]; MAX_PIECES])> {
         let n = self.samples.len();
+        let area_per_sample = self.area / n.max(1) as f32;
         for k in 2..=MAX_PIECES {
             let centres = kmeans(&self.samples, k, &mut self.cluster[..n], &mut self.order);
             let min_share = (n as f32 * MIN_SHARE / k as f32).ceil() as usize;
             let ok = (0..k).all(|c| {
                 let count = self.cluster[..n].iter().filter(|&&x| x as usize == c).count();
-                count >= min_share && cluster_fits(&self.samples, &self.cluster[..n], c as u8, extent)
+                count >= min_share
+                    && count as f32 * area_per_sample <= max_area
+                    && cluster_fits(&self.samples, &self.cluster[..n], c as u8, extent)
             });
             if ok {
                 return Some((k, centres));
@@ -237,6 +259,58 @@ impl RegionSplitter {
     }
 }
 
+/// Per class (index = class id − 1): the largest area, m², of the convex
+/// hull of the object's surface samples projected along 64 view directions
+/// spread over the sphere — an upper bound of what one copy can cover.
+pub fn silhouette_areas(objects: &fusepose_scene::ObjectSet) -> Vec<f32> {
+    const DIRECTIONS: usize = 64;
+    let golden = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    objects
+        .objects
+        .iter()
+        .map(|o| {
+            let mut best = 0.0f64;
+            let mut flat: Vec<[f64; 2]> = Vec::with_capacity(o.samples.len());
+            for i in 0..DIRECTIONS {
+                let z = 1.0 - 2.0 * (i as f64 + 0.5) / DIRECTIONS as f64;
+                let r = (1.0 - z * z).sqrt();
+                let d = nalgebra::Vector3::new(r * (golden * i as f64).cos(), r * (golden * i as f64).sin(), z);
+                let a = if d.x.abs() < 0.9 { nalgebra::Vector3::x() } else { nalgebra::Vector3::y() };
+                let e1 = d.cross(&a).normalize();
+                let e2 = d.cross(&e1);
+                flat.clear();
+                flat.extend(o.samples.iter().map(|p| [p.coords.dot(&e1), p.coords.dot(&e2)]));
+                best = best.max(hull_area(&mut flat));
+            }
+            best as f32
+        })
+        .collect()
+}
+
+/// Area of the convex hull of `points` (sorted in place; monotone chain).
+fn hull_area(points: &mut [[f64; 2]]) -> f64 {
+    points.sort_unstable_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * points.len() + 1);
+    for pass in 0..2 {
+        let start = hull.len();
+        let add = |p: [f64; 2], hull: &mut Vec<[f64; 2]>| {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], p) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(p);
+        };
+        if pass == 0 {
+            points.iter().for_each(|&p| add(p, &mut hull));
+        } else {
+            points.iter().rev().for_each(|&p| add(p, &mut hull));
+        }
+        hull.pop();
+    }
+    let n = hull.len();
+    (0..n).map(|i| cross([0.0, 0.0], hull[i], hull[(i + 1) % n])).sum::<f64>().abs() / 2.0
+}
+
 /// Share of point pairs that may lie farther apart than the extent in one
 /// object: the segmenter's masks bleed a cell or two onto the table, which
 /// stretches a region's extreme pairs but few of its pairs (chosen on the
@@ -244,6 +318,12 @@ impl RegionSplitter {
 pub const TOLERANCE: f32 = 0.05;
 /// Each of k clusters must hold at least this share of 1/k of the samples.
 pub const MIN_SHARE: f32 = 0.5;
+/// A region covering more than this × the object's largest silhouette area
+/// (`silhouette_areas`) holds more than one copy even when its points fit
+/// (copies side by side along their narrowest side), and each piece must
+/// cover at most that much (chosen on the tuning splits; the margin is for
+/// masks that bleed).
+pub const AREA_FACTOR: f32 = 1.3;
 /// Most distance between two pieces' mean chromaticities (r, g over
 /// r + g + b) for them to be copies of one object (chosen on the tuning
 /// splits: copies side by side differ by under 0.04, most regions that took
@@ -430,12 +510,13 @@ mod tests {
 
     /// [`split`] with every second block `step` × 0.1 mm farther away.
     fn split_stepped(extent: f32, blocks: &[(usize, usize)], spike: Option<usize>, step: u16) -> (Vec<u32>, u32) {
-        split_painted(extent, blocks, spike, step, &[[90, 60, 30]])
+        split_painted(extent, &[], blocks, spike, step, &[[90, 60, 30]])
     }
 
     /// [`split_stepped`] with block i painted `colours[i % len]`.
     fn split_painted(
         extent: f32,
+        area: &[f32],
         blocks: &[(usize, usize)],
         spike: Option<usize>,
         step: u16,
@@ -465,7 +546,7 @@ mod tests {
         let limits = InstanceLimits { min_pixels: 1, max_instances: 8, num_classes: 0 };
         let mut finder = InstanceFinder::with_capacity(W * H, 8);
         finder.find(&LabelPlane::U8(&labels), W, H, limits);
-        let mut splitter = RegionSplitter::new(&[extent], 8);
+        let mut splitter = RegionSplitter::new(&[extent], area, 8);
         let added = splitter.split(&mut finder, &frame, limits);
         (finder.components().iter().map(|c| c.pixels).collect(), added)
     }
@@ -484,11 +565,34 @@ mod tests {
     fn touching_regions_of_other_colours_are_not_copies() {
         // The pair of the test above, one block brown and one blue: another
         // object the segmenter gave this class, not a second copy.
-        let (pixels, added) = split_painted(0.17, &[(20, 35), (36, 51)], None, 0, &[[90, 60, 30], [30, 60, 120]]);
+        let (pixels, added) = split_painted(0.17, &[], &[(20, 35), (36, 51)], None, 0, &[[90, 60, 30], [30, 60, 120]]);
         assert_eq!((pixels, added), (vec![512], 0));
         // Brighter and darker (light and shadow on two copies) are still copies.
-        let (pixels, added) = split_painted(0.17, &[(20, 35), (36, 51)], None, 0, &[[90, 60, 30], [45, 30, 15]]);
+        let (pixels, added) = split_painted(0.17, &[], &[(20, 35), (36, 51)], None, 0, &[[90, 60, 30], [45, 30, 15]]);
         assert_eq!((pixels, added), (vec![256, 256], 1));
+    }
+
+    #[test]
+    fn a_region_larger_than_one_copy_is_cut_even_when_its_points_fit() {
+        // The pair (0.0512 m² at 1 m) fits an extent of 0.4 m, but not 1.3 ×
+        // a 0.03 m² silhouette; each block (0.0256 m²) does.
+        let pair = [(20, 35), (36, 51)];
+        let paint = [[90, 60, 30]];
+        assert_eq!(split_painted(0.4, &[0.03], &pair, None, 0, &paint), (vec![256, 256], 1));
+        // A silhouette of 0.05 m² could cover it: one object.
+        assert_eq!(split_painted(0.4, &[0.05], &pair, None, 0, &paint), (vec![512], 0));
+    }
+
+    #[test]
+    fn silhouette_area_of_a_box_lies_between_its_largest_face_and_its_bound() {
+        let objects = fusepose_scene::builtin::builtin_objects();
+        let class = objects.class_of("wood_block").expect("built-in wood block");
+        let area = silhouette_areas(&objects)[class as usize - 1] as f64;
+        // 0.085 × 0.085 × 0.2 m: largest face 0.017 m²; a box's projection
+        // never exceeds the root of the summed squared face areas.
+        let faces = [0.085 * 0.2, 0.085 * 0.2, 0.085 * 0.085];
+        let bound = faces.iter().map(|a: &f64| a * a).sum::<f64>().sqrt();
+        assert!(area > 0.97 * faces[0] && area <= 1.001 * bound, "{area} not in [{}, {bound}]", faces[0]);
     }
 
     #[test]

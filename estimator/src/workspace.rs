@@ -218,8 +218,8 @@ impl Workspace {
     /// each do (see [`crate::split`]; instance planes are never cut):
     /// `extents[k]` as for [`join_parts`](Self::join_parts). An empty slice
     /// turns splitting off. Allocates; call it at start-up, not per frame.
-    pub fn split_regions(&mut self, extents: &[f32]) {
-        self.splitter = (!extents.is_empty()).then(|| RegionSplitter::new(extents, self.config.max_instances));
+    pub fn split_regions(&mut self, extents: &[f32], areas: &[f32]) {
+        self.splitter = (!extents.is_empty()).then(|| RegionSplitter::new(extents, areas, self.config.max_instances));
     }
 
     /// What the last [`prepare`](Self::prepare) skipped.

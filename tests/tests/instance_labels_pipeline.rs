@@ -5,8 +5,9 @@
 //! message: one pose per instance, with distinct instance ids and the
 //! `FROM_INSTANCE_LABELS` flag. The same frame with class labels gives one
 //! region, so one pose: the boxes stand side by side along their narrow
-//! side, overlapping, and the region's points nearly fit inside one box, so
-//! the daemon's cut of regions that hold several copies
+//! side, overlapping: the region's points nearly fit inside one box and it
+//! covers less than 1.3 box silhouettes, so the daemon's cut of regions that
+//! hold several copies
 //! (`estimator.split_regions`) does not fire — the limit of cutting by
 //! geometry; only the instance plane tells these two apart. The
 //! daemon's stats count every pose that failed the depth check.
