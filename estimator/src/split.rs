@@ -16,7 +16,8 @@
 //! bleeds onto the table stretches only the extreme pairs, a second copy many
 //! of them. One that does not fit is clustered by k-means in 3D for k = 2, 3,
 //! … [`MAX_PIECES`] ([`ITERATIONS`] Lloyd steps on the samples from two
-//! deterministic seedings, see [`Seeding`], keeping the tighter result); the
+//! deterministic seedings, farthest points and slabs along the principal
+//! axis, keeping the tighter result); the
 //! first k whose clusters each fit and each hold at least [`MIN_SHARE`] ÷ k
 //! of the points wins, and [`FULL_ITERATIONS`] Lloyd steps over its
 //! pixels place the cuts. The cut is made only when the pieces share their

@@ -24,15 +24,15 @@ pub struct NetConfig {
     pub cnn: [usize; 3],
     /// Per-pixel colour embedding channels (decoder output).
     pub emb: usize,
-    /// Geometry PointNet widths (1x1 convs 3 -> geo[0] -> geo[1]).
+    /// Geometry PointNet widths (1x1 convs `3 -> geo[0] -> geo[1]`).
     pub geo: [usize; 2],
-    /// Colour per-point widths (emb -> col[0] -> col[1]).
+    /// Colour per-point widths (`emb -> col[0] -> col[1]`).
     pub col: [usize; 2],
-    /// Fusion lift (geo[1] + col[1] -> lift[0] -> lift[1]); lift[1] is the global feature.
+    /// Fusion lift (`geo[1] + col[1] -> lift[0] -> lift[1]`); `lift[1]` is the global feature.
     pub lift: [usize; 2],
-    /// Per-point head trunk (local + global -> trunk[0] -> trunk[1]).
+    /// Per-point head trunk (`local + global -> trunk[0] -> trunk[1]`).
     pub trunk: [usize; 2],
-    /// Refiner lift (local features -> ref_lift[0] -> ref_lift[1] = refiner global feature).
+    /// Refiner lift (`local features -> ref_lift[0] -> ref_lift[1]` = refiner global feature).
     pub ref_lift: [usize; 2],
     /// Refiner head hidden width (global -> ref_head -> K x (4 + 3)).
     pub ref_head: usize,

@@ -3,7 +3,7 @@
 //! objects and background out), whose argmax label plane feeds
 //! [`crate::Workspace::prepare`] through [`crate::FrameView::labels`].
 //!
-//! Layout: [`config`] (architecture, tensor shapes, cost), [`file`] (weight
+//! Layout: [`config`] (architecture, tensor shapes, cost), [`file`](mod@file) (weight
 //! file reading and object-set checks), [`input`] (frame ↔ grid tables:
 //! network input, upsampling, training targets), [`engine`] (the forward pass
 //! on preallocated buffers), [`boundary`] (cell labels → frame labels), [`voting`] (instances from centre-offset votes), [`merge`] (instances
