@@ -260,10 +260,11 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     let mut mask_sources = args.masks.clone();
     mask_sources.dedup();
     let solids = std::sync::Arc::new(fusepose_estimator::interpenetration::Solids::new(&objects));
+    let cut_limits = fusepose_estimator::split::CutLimits::new(&objects, args.split_regions);
     let mut runners = kinds
         .iter()
         .flat_map(|&k| mask_sources.iter().map(move |&m| (k, m)))
-        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &solids, &args))
+        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &solids, &cut_limits, &args))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut net_masks = match mask_sources.contains(&MaskSource::Net) {
         false => None,
@@ -433,6 +434,7 @@ impl Runner {
         several_masks: bool,
         objects: &ObjectSet,
         solids: &std::sync::Arc<fusepose_estimator::interpenetration::Solids>,
+        cut_limits: &fusepose_estimator::split::CutLimits,
         args: &Args,
     ) -> anyhow::Result<Self> {
         let name =
@@ -455,10 +457,7 @@ impl Runner {
         };
         let mut workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
         workspace.join_parts(&fusepose_estimator::parts::extents(objects, args.join_parts));
-        workspace.split_regions(
-            &fusepose_estimator::parts::extents(objects, args.split_regions),
-            &fusepose_estimator::split::silhouette_areas(objects),
-        );
+        workspace.split_regions(cut_limits);
         let csv = match &args.csv {
             None => None,
             Some(path) => {

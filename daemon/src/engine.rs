@@ -9,6 +9,7 @@ use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
 use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile, VotingMode};
+use fusepose_estimator::split::CutLimits;
 use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{
     EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
@@ -41,13 +42,9 @@ pub struct EngineSpec {
     /// many metres of each other are one instance (`estimator.join_parts`);
     /// empty = never join.
     pub part_extents: Vec<f32>,
-    /// Per class (id − 1): a region of the class whose points do not fit
-    /// within this many metres is cut into copies (`estimator.split_regions`);
-    /// empty = never split.
-    pub split_extents: Vec<f32>,
-    /// Per class (id − 1): the object's largest silhouette area, m²
-    /// (`fusepose_estimator::split::silhouette_areas`).
-    pub split_areas: Vec<f32>,
+    /// Per class: when a region holds several copies and is cut
+    /// (`estimator.split_regions`); empty extents = never cut.
+    pub cut_limits: CutLimits,
     /// Per-class distance under which two instances or poses are one object
     /// (`estimator.duplicates`); empty = off.
     pub separations: Vec<f32>,
@@ -148,8 +145,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
         }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
-        spec.split_extents = fusepose_estimator::parts::extents(&objects, config.split_regions);
-        spec.split_areas = fusepose_estimator::split::silhouette_areas(&objects);
+        spec.cut_limits = CutLimits::new(&objects, config.split_regions);
         spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
         if config.max_interpenetration < 1.0 {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
@@ -191,8 +187,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
-            split_extents: Vec::new(),
-            split_areas: Vec::new(),
+            cut_limits: CutLimits::default(),
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
@@ -212,8 +207,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
-            split_extents: Vec::new(),
-            split_areas: Vec::new(),
+            cut_limits: CutLimits::default(),
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
@@ -299,8 +293,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         min_confidence: 0.0,
         verify: None,
         part_extents: Vec::new(),
-        split_extents: Vec::new(),
-        split_areas: Vec::new(),
+        cut_limits: CutLimits::default(),
         separations: Vec::new(),
         interpenetration: None,
         seg_boundary: Boundary::default(),
@@ -470,7 +463,7 @@ impl PoseEngine {
             Some(_) => {
                 let mut ws = Workspace::new(workspace_config).map_err(|e| anyhow::anyhow!("estimator: {e}"))?;
                 ws.join_parts(&spec.part_extents);
-                ws.split_regions(&spec.split_extents, &spec.split_areas);
+                ws.split_regions(&spec.cut_limits);
                 Some(ws)
             }
             None => None,

@@ -52,6 +52,26 @@ pub const FULL_ITERATIONS: usize = 3;
 /// Most pixels of a region those iterations and the colour test visit.
 pub const REFINE_PIXELS: usize = 4096;
 
+/// What the cut needs of each class (index = class id − 1), worked out once
+/// at start-up: the extent (the object's diameter × a factor, metres) and
+/// the largest silhouette ([`silhouette_areas`], m²; empty = no area test).
+/// Empty extents turn the cut off.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct CutLimits {
+    pub extents: Vec<f32>,
+    pub areas: Vec<f32>,
+}
+
+impl CutLimits {
+    /// Extents of `factor` × each object's diameter and its silhouette
+    /// areas; empty (the cut off) when `factor` is not positive.
+    pub fn new(objects: &fusepose_scene::ObjectSet, factor: f32) -> Self {
+        let extents = crate::parts::extents(objects, factor);
+        let areas = if extents.is_empty() { Vec::new() } else { silhouette_areas(objects) };
+        Self { extents, areas }
+    }
+}
+
 /// Cuts same-class regions that hold several objects; see the module doc.
 #[derive(Debug)]
 pub struct RegionSplitter {
@@ -67,8 +87,8 @@ pub struct RegionSplitter {
     depths: Vec<f32>,
     /// Cluster of each sample.
     cluster: Vec<u8>,
-    /// Valid-depth pixel indices of the region being tested.
-    pixels: Vec<u32>,
+    /// Valid-depth pixels of the region being tested: (index, depth in metres).
+    pixels: Vec<(u32, f32)>,
     /// Samples ordered along their principal axis: (position, sample index).
     order: Vec<(f32, u8)>,
     /// Kept regions of the frame: (component id, class id).
@@ -76,13 +96,12 @@ pub struct RegionSplitter {
 }
 
 impl RegionSplitter {
-    /// A splitter for at most `max_instances` regions per frame; `extents[k]`
-    /// is the extent of class id k + 1 in metres (an object's diameter, times
-    /// a slack for depth noise). Non-finite or non-positive extents never split.
-    pub fn new(extents: &[f32], areas: &[f32], max_instances: usize) -> Self {
+    /// A splitter for at most `max_instances` regions per frame with the
+    /// per-class `limits`. Non-finite or non-positive extents never split.
+    pub fn new(limits: &CutLimits, max_instances: usize) -> Self {
         Self {
-            extents: ClassExtents::new(extents),
-            areas: ClassExtents::new(areas),
+            extents: ClassExtents::new(&limits.extents),
+            areas: ClassExtents::new(&limits.areas),
             area: 0.0,
             samples: Vec::with_capacity(SAMPLES),
             depths: Vec::with_capacity(SAMPLES),
@@ -114,7 +133,7 @@ impl RegionSplitter {
             self.sample(finder, id, frame, extent);
             let max_area = AREA_FACTOR * self.areas.of(class);
             let too_large = max_area > 0.0 && self.area > max_area;
-            if self.samples.len() < 2 * MAX_PIECES || (!too_large && fits(&self.samples, extent)) {
+            if self.samples.len() < 2 * MAX_PIECES || (!too_large && fits(&self.samples, extent, |_| true)) {
                 continue;
             }
             let max_area = if max_area > 0.0 { max_area } else { f32::INFINITY };
@@ -158,31 +177,29 @@ impl RegionSplitter {
         for v in v0..=v1 {
             for u in u0..=u1 {
                 let p = v * w + u;
-                if ids.get(p) == Some(&id) && frame.depth.metres(p).is_some() {
-                    self.pixels.push(p as u32);
+                if let Some(z) = frame.depth.metres(p).filter(|_| ids.get(p) == Some(&id)) {
+                    self.pixels.push((p as u32, z));
                 }
             }
         }
         let k = &frame.intrinsics;
         let per_m2 = 1.0 / (k.fx * k.fy) as f32;
-        self.area = self.pixels.iter().filter_map(|&p| frame.depth.metres(p as usize)).map(|z| z * z * per_m2).sum();
+        self.area = self.pixels.iter().map(|&(_, z)| z * z * per_m2).sum();
         let count = self.pixels.len();
         let take = count.min(SAMPLES);
         let pick = |i: usize| {
             let phase = (i as f64 * 0.618_033_988_75).fract();
-            self.pixels[(((i as f64 + phase) * count as f64 / take as f64) as usize).min(count - 1)] as usize
+            self.pixels[(((i as f64 + phase) * count as f64 / take as f64) as usize).min(count - 1)]
         };
-        self.depths.extend((0..take).filter_map(|i| frame.depth.metres(pick(i))));
+        self.depths.extend((0..take).map(|i| pick(i).1));
         if self.depths.is_empty() {
             return;
         }
         self.depths.sort_unstable_by(f32::total_cmp);
         let median = self.depths[self.depths.len() / 2];
-        for i in 0..take {
-            let p = pick(i);
-            if let Some(z) = frame.depth.metres(p).filter(|z| (z - median).abs() <= extent) {
-                self.samples.push(back_project(frame, p % w, p / w, z));
-            }
+        for (p, z) in (0..take).map(pick).filter(|&(_, z)| (z - median).abs() <= extent) {
+            let p = p as usize;
+            self.samples.push(back_project(frame, p % w, p / w, z));
         }
     }
 
@@ -195,9 +212,8 @@ impl RegionSplitter {
         let stride = self.pixels.len().div_ceil(REFINE_PIXELS).max(1);
         for _ in 0..FULL_ITERATIONS {
             let mut sums = [[0.0f64; 4]; MAX_PIECES];
-            for &p in self.pixels.iter().step_by(stride) {
+            for &(p, z) in self.pixels.iter().step_by(stride) {
                 let p = p as usize;
-                let Some(z) = frame.depth.metres(p) else { continue };
                 let q = back_project(frame, p % w, p / w, z);
                 let s = &mut sums[nearest(&centres[..k], q)];
                 *s = [s[0] + q[0] as f64, s[1] + q[1] as f64, s[2] + q[2] as f64, s[3] + 1.0];
@@ -221,7 +237,7 @@ impl RegionSplitter {
     fn same_colours(&self, frame: &FrameView<'_>, k: usize, piece: &dyn Fn(usize) -> usize) -> bool {
         let stride = self.pixels.len().div_ceil(REFINE_PIXELS).max(1);
         let mut sums = [[0.0f64; 4]; MAX_PIECES];
-        for &p in self.pixels.iter().step_by(stride) {
+        for &(p, _) in self.pixels.iter().step_by(stride) {
             let p = p as usize;
             let Some(rgb) = frame.color.get(p * 3..p * 3 + 3) else { continue };
             let s = &mut sums[piece(p)];
@@ -250,7 +266,7 @@ impl RegionSplitter {
                 let count = self.cluster[..n].iter().filter(|&&x| x as usize == c).count();
                 count >= min_share
                     && count as f32 * area_per_sample <= max_area
-                    && cluster_fits(&self.samples, &self.cluster[..n], c as u8, extent)
+                    && fits(&self.samples, extent, |i| self.cluster[i] as usize == c)
             });
             if ok {
                 return Some((k, centres));
@@ -331,19 +347,11 @@ pub const AREA_FACTOR: f32 = 1.3;
 /// in another object by over 0.1).
 pub const MAX_CHROMA_DISTANCE: f64 = 0.08;
 
-/// Whether at most [`TOLERANCE`] of the pairs of `points` lie farther apart than `extent`.
-fn fits(points: &[[f32; 3]], extent: f32) -> bool {
+/// Whether at most [`TOLERANCE`] of the pairs of `points` lie farther apart
+/// than `extent`.
+/// Only the points `i` with `member(i)` take part.
+fn fits(points: &[[f32; 3]], extent: f32, member: impl Fn(usize) -> bool) -> bool {
     let e2 = extent * extent;
-    let n = points.len();
-    let far: usize =
-        points.iter().enumerate().map(|(i, p)| points[i + 1..].iter().filter(|q| dist2(p, q) > e2).count()).sum();
-    far as f32 <= TOLERANCE * (n * n.saturating_sub(1) / 2) as f32
-}
-
-/// [`fits`] for the points of cluster `c`.
-fn cluster_fits(points: &[[f32; 3]], cluster: &[u8], c: u8, extent: f32) -> bool {
-    let e2 = extent * extent;
-    let member = |i: usize| cluster[i] == c;
     let n = (0..points.len()).filter(|&i| member(i)).count();
     let far: usize = (0..points.len())
         .filter(|&i| member(i))
@@ -547,7 +555,7 @@ mod tests {
         let limits = InstanceLimits { min_pixels: 1, max_instances: 8, num_classes: 0 };
         let mut finder = InstanceFinder::with_capacity(W * H, 8);
         finder.find(&LabelPlane::U8(&labels), W, H, limits);
-        let mut splitter = RegionSplitter::new(&[extent], area, 8);
+        let mut splitter = RegionSplitter::new(&CutLimits { extents: vec![extent], areas: area.to_vec() }, 8);
         let added = splitter.split(&mut finder, &frame, limits);
         (finder.components().iter().map(|c| c.pixels).collect(), added)
     }

@@ -19,7 +19,7 @@ use crate::frame::{FrameError, FrameView, LabelPlane};
 use crate::instances::{Component, InstanceFinder, InstanceLimits, LabelStats};
 use crate::parts::PartJoiner;
 use crate::sampling;
-use crate::split::RegionSplitter;
+use crate::split::{CutLimits, RegionSplitter};
 
 /// Sizes fixed at start-up; buffers are allocated once from them.
 ///
@@ -216,10 +216,10 @@ impl Workspace {
     /// From the next frame on, cuts a region of one class of a class plane
     /// whose points do not fit inside one object into the fewest pieces that
     /// each do (see [`crate::split`]; instance planes are never cut):
-    /// `extents[k]` as for [`join_parts`](Self::join_parts). An empty slice
-    /// turns splitting off. Allocates; call it at start-up, not per frame.
-    pub fn split_regions(&mut self, extents: &[f32], areas: &[f32]) {
-        self.splitter = (!extents.is_empty()).then(|| RegionSplitter::new(extents, areas, self.config.max_instances));
+    /// `limits` from [`CutLimits::new`]; empty extents turn splitting off.
+    /// Allocates; call it at start-up, not per frame.
+    pub fn split_regions(&mut self, limits: &CutLimits) {
+        self.splitter = (!limits.extents.is_empty()).then(|| RegionSplitter::new(limits, self.config.max_instances));
     }
 
     /// What the last [`prepare`](Self::prepare) skipped.

@@ -75,10 +75,7 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
     let mut ws = Workspace::new(WorkspaceConfig { num_classes: 2, ..Default::default() }).unwrap();
     ws.join_parts(&fusepose_estimator::parts::extents(&objects, 1.0));
-    ws.split_regions(
-        &fusepose_estimator::parts::extents(&objects, 1.0),
-        &fusepose_estimator::split::silhouette_areas(&objects),
-    );
+    ws.split_regions(&fusepose_estimator::split::CutLimits::new(&objects, 1.0));
     let mut out = PoseSet::with_capacity(8);
 
     let warm = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [-0.05, 0.0, 0.5]))]);

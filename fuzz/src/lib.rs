@@ -194,7 +194,7 @@ pub fn frame_path(data: &[u8]) -> FrameOutcome {
     // Joining same-class pieces and cutting regions of several copies run
     // too (as in the daemon): 25 cm objects.
     ws.join_parts(&[0.25; 5]);
-    ws.split_regions(&[0.25; 5], &[0.02; 5]);
+    ws.split_regions(&fusepose_estimator::split::CutLimits { extents: vec![0.25; 5], areas: vec![0.02; 5] });
     let result = ws.prepare(&view, header.sequence);
     check_workspace(&ws, &view, &result);
     if view.labels.is_some_and(|l| l.is_instances()) {
