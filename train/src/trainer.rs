@@ -421,6 +421,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             last_ckpt = Instant::now();
             let p = opts.checkpoint_dir.join("checkpoint.safetensors");
             store::save(&net, &cfg, &objects, &record, &p)?;
+            // A checkpoint must resume like the file it came from, segmenter included
+            // (`--seg-masks` needs it).
+            if let Some(resume) = &opts.resume {
+                carry_segmenter(resume, &p)?;
+            }
             log.line(&format!("# checkpoint {} at step {}", p.display(), record.steps));
         }
     }
@@ -452,6 +457,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     if let Some(resume) = &opts.resume
         && carry_segmenter(resume, &opts.out)?
     {
+        carry_segmenter(resume, &ckpt)?;
         log.line(&format!("# kept the segmenter embedded in {}", resume.display()));
     }
     log.line(&format!("# wrote {}", opts.out.display()));

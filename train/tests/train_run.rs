@@ -2,7 +2,8 @@
 //! model for two steps with half the frames masked by its own segmenter, then
 //! validate. The written file loads in the inference engine, counts the
 //! resumed steps, and keeps the segmenter the resumed file embedded (the
-//! pose trainer writes pose tensors only; the segmenter is carried over).
+//! pose trainer writes pose tensors only; the segmenter is carried over,
+//! into its checkpoints as well).
 
 use std::path::PathBuf;
 use std::sync::Arc;
@@ -33,7 +34,7 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
         lr: 1e-5,
         loss_points: 100,
         checkpoint_dir: dir.clone(),
-        checkpoint_every: Duration::from_secs(3600),
+        checkpoint_every: Duration::ZERO,
         log: None,
         val_frames: 2,
         val_max_samples: 4,
@@ -54,5 +55,9 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
     for (name, _) in ours.config.tensor_shapes() {
         assert_eq!(ours.tensor(&name).unwrap(), theirs.tensor(&name).unwrap(), "segmenter tensor {name}");
     }
+    // The checkpoint (written after every step here) resumes like the file
+    // it came from: `--seg-masks` needs the segmenter in it too.
+    let ckpt = SegFile::read(&dir.join("checkpoint.safetensors")).expect("checkpoint without the segmenter");
+    assert_eq!(ckpt.config, theirs.config);
     let _ = std::fs::remove_dir_all(&dir);
 }
