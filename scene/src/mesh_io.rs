@@ -108,10 +108,20 @@ pub fn load_object(path: &Path, scale: f64, name: &str, symmetry: Symmetry) -> R
 /// and the fix; huge meshes and missing textures are logged as warnings.
 pub fn load_object_dir(dir: &Path, scale: f64) -> Result<ObjectSet, MeshError> {
     let (set, warnings) = load_object_dir_checked(dir, scale, MissingTextures::Warn)?;
-    for w in warnings {
+    for w in warnings.iter().map(|w| w.to_string()).filter(|w| first_time(w)) {
         tracing::warn!("{w}");
     }
     Ok(set)
+}
+
+/// Whether this process has not logged `warning` yet: a folder loaded again
+/// (each stage of `fusepose train --stage all`, its acceptance report) warns
+/// once, not once per load.
+fn first_time(warning: &str) -> bool {
+    static LOGGED: std::sync::Mutex<std::collections::BTreeSet<String>> =
+        std::sync::Mutex::new(std::collections::BTreeSet::new());
+    let mut logged = LOGGED.lock().unwrap_or_else(|e| e.into_inner());
+    logged.insert(warning.to_owned())
 }
 
 /// [`load_object_dir`], returning the check warnings instead of logging them;

@@ -595,3 +595,11 @@ fn symmetry_suggestions_follow_the_geometry() {
     let tetra = crate::model::ObjectModel::from_mesh("tetra", tetra, Symmetry::None).unwrap();
     assert_eq!(suggest_symmetry(&tetra), SymmetrySuggestion::None);
 }
+
+#[test]
+fn a_warning_is_logged_once_per_process() {
+    let text = "a.obj: texture t.png named by a.mtl does not exist (test-only message)";
+    assert!(first_time(text), "first time");
+    assert!(!first_time(text), "second time");
+    assert!(first_time("another test-only message"));
+}
