@@ -206,6 +206,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     // Training scenes: a per-seed, per-resume range far from the validation seeds.
     let first_seed = (opts.seed % 1000) * 1_000_000_000 + start_steps * 7 + 1;
     let seg = seg_masks(opts, &set)?;
+    // Read once: checkpoints overwrite the resumed file when resuming from one.
+    let carried = match &opts.resume {
+        Some(resume) => embedded_segmenter(resume)?,
+        None => None,
+    };
     let mut stream = Stream::spawn(set.clone(), data_cfg, opts.source.clone(), first_seed, 512, seg);
     let mut rng = Pcg64::seed_from_u64(opts.seed ^ start_steps.wrapping_mul(0x9e37_79b9));
     let mut optim = AdamConfig::new().init();
@@ -423,8 +428,8 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             store::save(&net, &cfg, &objects, &record, &p)?;
             // A checkpoint must resume like the file it came from, segmenter included
             // (`--seg-masks` needs it).
-            if let Some(resume) = &opts.resume {
-                carry_segmenter(resume, &p)?;
+            if let Some(seg) = &carried {
+                embed_segmenter(seg, &p)?;
             }
             log.line(&format!("# checkpoint {} at step {}", p.display(), record.steps));
         }
@@ -454,31 +459,33 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     record.metrics = validation.metrics.clone();
     store::save(&net, &cfg, &objects, &record, &opts.out)?;
     store::save(&net, &cfg, &objects, &record, &ckpt)?;
-    if let Some(resume) = &opts.resume
-        && carry_segmenter(resume, &opts.out)?
-    {
-        carry_segmenter(resume, &ckpt)?;
+    if let (Some(seg), Some(resume)) = (&carried, &opts.resume) {
+        embed_segmenter(seg, &opts.out)?;
+        embed_segmenter(seg, &ckpt)?;
         log.line(&format!("# kept the segmenter embedded in {}", resume.display()));
     }
     log.line(&format!("# wrote {}", opts.out.display()));
     Ok(TrainSummary { record, validation, out: opts.out.clone(), step_ms: step_time * 1000.0 })
 }
 
-/// Embeds the segmenter of `resume` (if it has one) into the freshly written
-/// `out`, so retraining the pose network keeps the file's segmenter. Returns
-/// whether there was one.
-fn carry_segmenter(resume: &Path, out: &Path) -> anyhow::Result<bool> {
+/// The segmenter embedded in `resume`, if it has one: retraining the pose
+/// network keeps the file's segmenter ([`embed_segmenter`]).
+fn embedded_segmenter(resume: &Path) -> anyhow::Result<Option<SegFile>> {
     let bytes = std::fs::read(resume).with_context(|| format!("reading {}", resume.display()))?;
-    let Ok((_, header)) = safetensors::SafeTensors::read_metadata(&bytes) else { return Ok(false) };
+    let Ok((_, header)) = safetensors::SafeTensors::read_metadata(&bytes) else { return Ok(None) };
     if !has_embedded(&header.metadata().clone().unwrap_or_default()) {
-        return Ok(false);
+        return Ok(None);
     }
     let seg = SegFile::from_bytes(&bytes)
         .with_context(|| format!("reading the segmenter embedded in {}", resume.display()))?;
+    Ok(Some(seg))
+}
+
+/// Embeds `seg` into the freshly written pose-network file `out`.
+fn embed_segmenter(seg: &SegFile, out: &Path) -> anyhow::Result<()> {
     let pose = std::fs::read(out).with_context(|| format!("reading {}", out.display()))?;
-    let merged = embed(&pose, &seg).with_context(|| format!("embedding the segmenter into {}", out.display()))?;
-    std::fs::write(out, merged).with_context(|| format!("writing {}", out.display()))?;
-    Ok(true)
+    let merged = embed(&pose, seg).with_context(|| format!("embedding the segmenter into {}", out.display()))?;
+    std::fs::write(out, merged).with_context(|| format!("writing {}", out.display()))
 }
 
 /// Seconds since the Unix epoch (no clock crate needed for a log stamp).

@@ -59,5 +59,12 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
     // it came from: `--seg-masks` needs the segmenter in it too.
     let ckpt = SegFile::read(&dir.join("checkpoint.safetensors")).expect("checkpoint without the segmenter");
     assert_eq!(ckpt.config, theirs.config);
+    // Resuming from that checkpoint into the same folder overwrites the
+    // resumed file at each checkpoint; the segmenter must survive that too.
+    let resumed = dir.join("checkpoint.safetensors");
+    let again = TrainOptions { resume: Some(resumed.clone()), steps: Some(start + 3), ..opts };
+    train(Arc::new(builtin_objects()), &again).unwrap();
+    let ckpt = SegFile::read(&resumed).expect("checkpoint resumed from itself lost the segmenter");
+    assert_eq!(ckpt.config, theirs.config);
     let _ = std::fs::remove_dir_all(&dir);
 }
