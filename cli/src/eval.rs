@@ -126,6 +126,11 @@ pub struct Args {
     /// `off` (the head ignored: class regions, as without it).
     #[arg(long)]
     pub seg_voting: Option<fusepose_estimator::seg::voting::VotingMode>,
+    /// `--masks net`: lower the background logit by this much before the
+    /// argmax (log odds; more of partly hidden objects found, more regions
+    /// for verification to refuse). Default: the engine's, 0.
+    #[arg(long)]
+    pub seg_background_offset: Option<f32>,
     /// `--masks net`: how cell labels become frame labels: `cells`,
     /// `erode-cells` or `refine:N` (pixel borders from interpolated logits, N
     /// pixels eroded); default: the engine's.
@@ -281,6 +286,7 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
                 args.seg_boundary,
                 args.seg_min_interior,
                 args.seg_voting,
+                args.seg_background_offset,
             )?)
         }
     };

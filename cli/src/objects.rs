@@ -1,11 +1,13 @@
 //! `fusepose objects`: list an object set (built-in or a folder of meshes) or
-//! export the built-in set as OBJ + MTL + PNG folders with `models_info.json`.
+//! export it as fusepose loads it (metres, textures resolved) as OBJ + MTL +
+//! PNG folders with `models_info.json`, which other tools read (the
+//! path-traced split's Blender script, `tools/blender/`).
 
 use std::path::{Path, PathBuf};
 
 use anyhow::Context;
 use fusepose_scene::export::export_objects;
-use fusepose_scene::mesh_io::checks::{MissingTextures, SymmetrySuggestion, suggest_symmetry};
+use fusepose_scene::mesh_io::checks::{CheckWarning, MissingTextures, SymmetrySuggestion, suggest_symmetry};
 use fusepose_scene::mesh_io::load_object_dir_checked;
 use fusepose_scene::symmetry_spec::{Describe, SymmetrySpec, apply_symmetry_specs};
 use fusepose_scene::{ObjectSet, builtin::builtin_objects};
@@ -31,18 +33,29 @@ enum Command {
         #[arg(long = "symmetry", value_name = "NAME=KIND")]
         symmetry: Vec<SymmetrySpec>,
     },
-    /// Write the built-in set to DIR: DIR/NAME/NAME.{obj,mtl,png} (metres) and DIR/models_info.json.
+    /// Write an object set as fusepose loads it to DIR: DIR/NAME/NAME.{obj,mtl,png}
+    /// (metres, the object frame fusepose's poses refer to) and DIR/models_info.json.
     Export {
         /// Output folder (created if missing; existing files are overwritten).
         dir: PathBuf,
+        /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
+        #[arg(long, default_value = "builtin")]
+        objects: String,
+        /// Metres per mesh-file unit (0.001 for millimetre models); not applied to `builtin`
+        #[arg(long, default_value_t = 1.0)]
+        scale: f64,
+        /// Symmetries written to models_info.json (as `train --symmetry`)
+        #[arg(long = "symmetry", value_name = "NAME=KIND")]
+        symmetry: Vec<SymmetrySpec>,
     },
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
         Command::List { objects, scale, symmetry } => print_listing(&objects, scale, &symmetry),
-        Command::Export { dir } => {
-            let set = builtin_objects();
+        Command::Export { dir, objects, scale, symmetry } => {
+            let mut set = load_set(&objects, scale)?.0;
+            apply_symmetry_specs(&mut set, &symmetry)?;
             let info = export_objects(&set, &dir).with_context(|| format!("exporting to {}", dir.display()))?;
             println!("wrote {} objects and {}", set.len(), info.display());
             Ok(())
@@ -50,17 +63,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
 }
 
+/// `builtin`, or the mesh folder `objects` with its mesh-check warnings.
+fn load_set(objects: &str, scale: f64) -> anyhow::Result<(ObjectSet, Vec<CheckWarning>)> {
+    if objects == "builtin" {
+        return Ok((builtin_objects(), Vec::new()));
+    }
+    load_object_dir_checked(Path::new(objects), scale, MissingTextures::Warn)
+        .with_context(|| format!("loading object set '{objects}'"))
+}
+
 /// Prints the listing of `objects` (see `List`) with the `--symmetry`
 /// declarations applied, and any mesh-check warnings; `train --stage all`
 /// prints it before training, so a wrong unit or a symmetry to declare shows
 /// before the hour is spent.
 pub fn print_listing(objects: &str, scale: f64, symmetry: &[SymmetrySpec]) -> anyhow::Result<()> {
-    let (mut set, warnings) = if objects == "builtin" {
-        (builtin_objects(), Vec::new())
-    } else {
-        load_object_dir_checked(Path::new(objects), scale, MissingTextures::Warn)
-            .with_context(|| format!("loading object set '{objects}'"))?
-    };
+    let (mut set, warnings) = load_set(objects, scale)?;
     apply_symmetry_specs(&mut set, symmetry)?;
     let suggested: Vec<SymmetrySuggestion> = set.objects.iter().map(suggest_symmetry).collect();
     print!("{}", table(&set, &suggested));

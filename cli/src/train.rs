@@ -123,6 +123,11 @@ pub struct Args {
     /// `--stage seg`: network input size `WxH` of a fresh run (default 160x120).
     #[arg(long)]
     pub seg_size: Option<String>,
+    /// `--stage seg`: lift each small object region's cells in the loss by up
+    /// to this factor (√(200 cells / region cells), so partly hidden and far
+    /// objects are not given up for a cleaner background; 1 = off).
+    #[arg(long, default_value_t = 1.0)]
+    pub seg_small_boost: f32,
     /// Domain randomisation of the rendered training scenes: off | default | strong
     /// (lights, shadows, materials, camera pipeline, tables, distractors, viewpoints).
     #[arg(long, default_value = "default")]

@@ -332,7 +332,7 @@ impl Default for EstimatorConfig {
             duplicates: 0.0,
             max_interpenetration: fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
-            seg_voting: "on".to_owned(),
+            seg_voting: "off".to_owned(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }

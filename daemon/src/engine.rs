@@ -191,7 +191,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
-            seg_voting: VotingMode::On(Default::default()),
+            seg_voting: VotingMode::Off,
             startup_cost: None,
             shared_segmenter: Default::default(),
         })
@@ -211,7 +211,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             separations: Vec::new(),
             interpenetration: None,
             seg_boundary: Boundary::default(),
-            seg_voting: VotingMode::On(Default::default()),
+            seg_voting: VotingMode::Off,
             startup_cost: None,
             shared_segmenter: Default::default(),
         }),
@@ -297,7 +297,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         separations: Vec::new(),
         interpenetration: None,
         seg_boundary: Boundary::default(),
-        seg_voting: VotingMode::On(Default::default()),
+        seg_voting: VotingMode::Off,
         startup_cost,
         shared_segmenter: Default::default(),
     })

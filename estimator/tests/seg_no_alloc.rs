@@ -160,6 +160,36 @@ fn segment_does_not_allocate_after_warm_up_and_feeds_the_workspace() {
 }
 
 #[test]
+fn a_background_offset_labels_more_cells_as_objects_and_zero_is_the_argmax() {
+    let set = object_set(&[l_block(), step_block()]);
+    let mut engine = engine(&set);
+    engine.set_min_component_cells(0);
+    engine.set_min_interior_cells(0);
+    engine.set_max_elongation(0.0);
+    let (c, d) = frame_planes(0);
+    let mut plain = vec![0u16; 640 * 480];
+    engine.segment(&view(&c, &d), &mut plain).unwrap();
+    let objects = |l: &[u16]| l.iter().filter(|&&v| v != 0).count();
+    // The cell argmax of the raw logits, before any offset.
+    engine.set_background_offset(0.0);
+    engine.segment(&view(&c, &d), &mut plain).unwrap();
+    let logits = engine.logits().to_vec();
+    let n = engine.cell_labels().len();
+    let argmax: Vec<u16> = (0..n)
+        .map(|i| (0..=set.len()).max_by(|&a, &b| logits[a * n + i].total_cmp(&logits[b * n + i])).unwrap_or(0) as u16)
+        .collect();
+    assert_eq!(engine.cell_labels(), &argmax[..], "offset 0 is the plain argmax");
+    let mut lifted = vec![0u16; 640 * 480];
+    engine.set_background_offset(1e6);
+    engine.segment(&view(&c, &d), &mut lifted).unwrap();
+    assert!(engine.cell_labels().iter().all(|&l| l != 0), "a huge offset leaves no background cell");
+    assert!(objects(&lifted) > objects(&plain), "{} vs {}", objects(&lifted), objects(&plain));
+    engine.set_background_offset(f32::NAN);
+    engine.segment(&view(&c, &d), &mut lifted).unwrap();
+    assert_eq!(lifted, plain, "a NaN offset is refused as 0");
+}
+
+#[test]
 fn engine_refuses_an_object_set_that_differs() {
     let set = object_set(&[l_block(), step_block()]);
     let file = SegFile::from_bytes(&weight_bytes(&SegConfig::new(2), &set)).unwrap();

@@ -138,6 +138,36 @@ fn every_subcommand_runs_once_with_tiny_sizes() -> anyhow::Result<()> {
     let text = run(&env, dir, &fp, &["objects", "list"])?;
     assert!(text.lines().count() >= 8, "{text}");
 
+    // objects export of a user's mesh folder: a millimetre cube comes out in
+    // metres, with the declared symmetry, where the Blender script reads it.
+    let meshes = dir.join("meshes");
+    std::fs::create_dir_all(&meshes)?;
+    let mut cube = String::new();
+    for i in 0..8 {
+        let c = |b: usize| if i & b != 0 { 20.0 } else { -20.0 };
+        cube += &format!("v {} {} {}\n", c(1), c(2), c(4));
+    }
+    for f in [[1, 3, 4], [1, 4, 2], [5, 6, 8], [5, 8, 7], [1, 2, 6], [1, 6, 5]] {
+        cube += &format!("f {} {} {}\n", f[0], f[1], f[2]);
+    }
+    for f in [[3, 7, 8], [3, 8, 4], [1, 5, 7], [1, 7, 3], [2, 4, 8], [2, 8, 6]] {
+        cube += &format!("f {} {} {}\n", f[0], f[1], f[2]);
+    }
+    std::fs::write(meshes.join("dice.obj"), cube)?;
+    let exported = dir.join("exported");
+    run(
+        &env,
+        dir,
+        &fp,
+        &["objects", "export", &s(&exported), "--objects", &s(&meshes), "--scale", "0.001", "--symmetry", "dice=box"],
+    )?;
+    let info: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(exported.join("models_info.json"))?)?;
+    let dice = &info["objects"][0];
+    assert_eq!((info["units"].as_str(), dice["name"].as_str()), (Some("metres"), Some("dice")), "{info}");
+    assert!((dice["bbox_max"][0].as_f64().unwrap_or(0.0) - 0.02).abs() < 1e-6, "scaled to metres: {info}");
+    assert_eq!(dice["symmetry"]["kind"].as_str(), Some("discrete"), "{info}");
+    assert!(exported.join(dice["mesh"].as_str().unwrap_or("-")).is_file(), "{info}");
+
     // eval: the network with the shipped weights by default; root and split folder give the same result.
     let (by_root, by_split) = (dir.join("root.json"), dir.join("split.json"));
     run(

@@ -15,6 +15,11 @@ Objects to render (the built-in set as OBJ + MTL + PNG and models_info.json):
 
     fusepose objects export scratch/objects
 
+or a folder of your own meshes, as fusepose loads them (metres, textures
+resolved; name the mesh folder with --source so that `fusepose eval` loads it):
+
+    fusepose objects export scratch/mine --objects meshes/ --scale 0.001 --symmetry suggested
+
 Render (run `blender` from any folder; everything after `--` goes to this script):
 
     nice -n 15 blender -b -t 1 --factory-startup --python tools/blender/render_bop_split.py -- \

@@ -110,6 +110,8 @@ fn engine_offsets_match_burn_forward_and_old_files_have_none() {
     net.offset = Some(burn::nn::conv::Conv2dConfig::new([cfg.dec[2], 2], [1, 1]).init(&Device::flex()));
     store::save(&net, &cfg, &object_entries(&set), &TrainRecord::default(), &serde_json::json!({}), &path).unwrap();
     let mut engine = SegEngine::load(&path, &set).unwrap();
+    assert!(!engine.separates_instances(), "the head is ignored unless voting is asked for");
+    engine.set_voting_mode(fusepose_estimator::seg::VotingMode::On(Default::default()));
     assert!(engine.separates_instances());
     let input = random_input(&cfg, 5);
     engine.forward(&input).unwrap();
@@ -149,7 +151,10 @@ fn engine_offsets_match_burn_forward_and_old_files_have_none() {
     let new_path = dir.path().join("new.safetensors");
     store::save(&with, &cfg, &object_entries(&set), &TrainRecord::default(), &serde_json::json!({}), &new_path)
         .unwrap();
-    assert!(SegEngine::load(&new_path, &set).unwrap().separates_instances());
+    let mut engine = SegEngine::load(&new_path, &set).unwrap();
+    engine.set_voting_mode(fusepose_estimator::seg::VotingMode::On(Default::default()));
+    assert!(engine.separates_instances(), "the added head is read");
+    assert_eq!(engine.offsets().len(), 2 * cfg.output_size().0 * cfg.output_size().1);
 }
 
 #[test]

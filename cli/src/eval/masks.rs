@@ -46,6 +46,7 @@ impl NetMasks {
         boundary: Option<Boundary>,
         min_interior: Option<usize>,
         voting: Option<VotingMode>,
+        background_offset: Option<f32>,
     ) -> anyhow::Result<Self> {
         let mut engine = SegEngine::load(weights, objects)
             .with_context(|| format!("--masks net: loading the segmenter of {}", weights.display()))?;
@@ -63,6 +64,9 @@ impl NetMasks {
         }
         if let Some(v) = voting {
             engine.set_voting_mode(v);
+        }
+        if let Some(o) = background_offset {
+            engine.set_background_offset(o);
         }
         Ok(Self {
             engine,

@@ -103,6 +103,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         log: args.log.clone(),
         progress: !args.quiet,
         sampler: super::training_sampler(args),
+        small_region_boost: args.seg_small_boost,
         ..SegTrainConfig::default()
     };
     let report = train_segmenter(cfg)?;

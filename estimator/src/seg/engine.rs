@@ -212,6 +212,8 @@ pub struct SegEngine {
     min_component_cells: usize,
     max_elongation: f32,
     min_interior_cells: usize,
+    /// Subtracted from the background logit before the argmax ([`SegEngine::set_background_offset`]).
+    background_offset: f32,
     boundary: Boundary,
     /// Eroded cell labels ([`Boundary::ErodeCells`]).
     eroded: Vec<u16>,
@@ -275,7 +277,7 @@ impl SegEngine {
             cell_ids: vec![0; hw(1)],
             instance_classes: Vec::with_capacity(hw(1) + 1),
             voting: Voting::new(s[1].1, s[1].0, VotingParams::default()),
-            use_offsets: true,
+            use_offsets: false,
             separation: Vec::new(),
             merger: InstanceMerger::default(),
             cols: vec![0.0; cols],
@@ -283,6 +285,7 @@ impl SegEngine {
             min_component_cells: MIN_COMPONENT_CELLS,
             max_elongation: MAX_ELONGATION,
             min_interior_cells: MIN_INTERIOR_CELLS,
+            background_offset: 0.0,
             boundary: Boundary::default(),
             eroded: vec![0; hw(1)],
             refine_scratch: BoundaryScratch::default(),
@@ -335,8 +338,12 @@ impl SegEngine {
         self.voting.set_params(params);
     }
 
-    /// Votes instances with the offset head (`On`, the default), or ignores
-    /// it (`Off`: class regions, as for a file without the head).
+    /// Votes instances with the offset head (`On`), or ignores it (`Off`,
+    /// the default: class regions, as for a file without the head). Off by
+    /// default since session 16: on the tuning splits the votes split single
+    /// objects (108 split instances on `fp_tune` against 14) and raised the
+    /// ghosts (0.04 → 0.47 per frame there), gaining on heaps only
+    /// (docs/BENCHMARKS.md, session 16).
     pub fn set_voting_mode(&mut self, mode: VotingMode) {
         match mode {
             VotingMode::On(params) => {
@@ -377,6 +384,15 @@ impl SegEngine {
         self.min_interior_cells = cells;
     }
 
+    /// Lowers the background logit by `offset` (natural-log odds) before the
+    /// argmax and the pixel borders: a cell whose best class is within
+    /// `offset` of background becomes that class. 0 (the default) is the
+    /// plain argmax; positive values find more of partly hidden objects and
+    /// leave the regions no pose explains to pose verification.
+    pub fn set_background_offset(&mut self, offset: f32) {
+        self.background_offset = if offset.is_finite() { offset } else { 0.0 };
+    }
+
     /// How cell labels become the frame's labels ([`Boundary`]; default
     /// [`Boundary::default`]). Cell-sized
     /// label steps put up to half a cell of background into an object's mask,
@@ -405,6 +421,10 @@ impl SegEngine {
         let Some(map) = self.map.take() else { return Ok(()) };
         map.fill_input(frame, &mut self.input);
         self.run();
+        if self.background_offset != 0.0 {
+            let n = self.cells.len();
+            self.logits[..n].iter_mut().for_each(|v| *v -= self.background_offset);
+        }
         self.argmax();
         let (_, out_w) = self.config.output_size();
         drop_small_components(

@@ -1,6 +1,8 @@
 //! Class-weighted per-pixel cross-entropy, and the class weights: inverse
 //! pixel frequency raised to a power (0.5 by default), so small objects are not
-//! drowned by the background.
+//! drowned by the background; optionally each object region's cells are
+//! weighted up the fewer they are, so a partly hidden object is not traded
+//! away for a cleaner background.
 
 use burn::prelude::{Int, Tensor, TensorData};
 use burn::tensor::activation::log_softmax;
@@ -19,16 +21,82 @@ pub fn class_weights(counts: &[u64], power: f64, max_ratio: f64) -> Vec<f32> {
     capped.iter().map(|w| (w / mean) as f32).collect()
 }
 
+/// Per-cell weight multipliers that lift small object regions: every
+/// 4-connected region of one non-zero class in each `w`×`h` target image gets
+/// `clamp(sqrt(reference_cells / cells), 1, max_boost)` on each of its cells;
+/// background cells get 1. `max_boost <= 1` gives all ones.
+pub fn small_region_weights(target: &[u16], w: usize, h: usize, reference_cells: f32, max_boost: f32) -> Vec<f32> {
+    let mut out = vec![1.0f32; target.len()];
+    if max_boost <= 1.0 || w == 0 || h == 0 {
+        return out;
+    }
+    let mut seen = vec![false; target.len()];
+    let (mut stack, mut members) = (Vec::new(), Vec::new());
+    for start in 0..target.len() {
+        let class = target[start];
+        if class == 0 || seen[start] {
+            continue;
+        }
+        // Images are stacked: neighbours never cross into the next image.
+        let image = start / (w * h);
+        let base = image * w * h;
+        members.clear();
+        stack.push(start);
+        seen[start] = true;
+        while let Some(i) = stack.pop() {
+            members.push(i);
+            let (x, y) = ((i - base) % w, (i - base) / w);
+            let mut visit = |j: usize| {
+                if target[j] == class && !seen[j] {
+                    seen[j] = true;
+                    stack.push(j);
+                }
+            };
+            if x > 0 {
+                visit(i - 1);
+            }
+            if x + 1 < w {
+                visit(i + 1);
+            }
+            if y > 0 {
+                visit(i - w);
+            }
+            if y + 1 < h {
+                visit(i + w);
+            }
+        }
+        let boost = (reference_cells / members.len() as f32).sqrt().clamp(1.0, max_boost);
+        for &i in &members {
+            out[i] = boost;
+        }
+    }
+    out
+}
+
 /// Weighted cross-entropy: `-Σ w[t_i] log softmax(logits)_i[t_i] / Σ w[t_i]` over all cells.
 /// `logits [B, C, H, W]`, `target` `B*H*W` class ids (`< C`), `weights` `C` values.
 pub fn weighted_cross_entropy(logits: Tensor<4>, target: &[u16], weights: &[f32]) -> Tensor<1> {
+    weighted_cross_entropy_scaled(logits, target, weights, None)
+}
+
+/// [`weighted_cross_entropy`] with each cell's class weight multiplied by
+/// `scale[i]` (`B*H*W` values, e.g. [`small_region_weights`]).
+pub fn weighted_cross_entropy_scaled(
+    logits: Tensor<4>,
+    target: &[u16],
+    weights: &[f32],
+    scale: Option<&[f32]>,
+) -> Tensor<1> {
     let [b, _, h, w] = logits.dims();
     let device = logits.device();
     let idx = Tensor::<4, Int>::from_data(
         TensorData::new(target.iter().map(|&t| t as i64).collect::<Vec<_>>(), [b, 1, h, w]),
         &device,
     );
-    let pw: Vec<f32> = target.iter().map(|&t| weights.get(t as usize).copied().unwrap_or(1.0)).collect();
+    let mut pw: Vec<f32> = target.iter().map(|&t| weights.get(t as usize).copied().unwrap_or(1.0)).collect();
+    if let Some(scale) = scale {
+        pw.iter_mut().zip(scale).for_each(|(p, s)| *p *= s);
+    }
     let norm: f32 = pw.iter().sum::<f32>().max(1e-6);
     let pw = Tensor::<4>::from_data(TensorData::new(pw, [b, 1, h, w]), &device);
     let picked = log_softmax(logits, 1).gather(1, idx);
@@ -70,6 +138,40 @@ mod tests {
         let v = loss.into_data().try_to_vec::<f32>().unwrap()[0];
         // cell 0: target 1, p = 3/4, weight 3; cell 1: target 0, p = 1/2, weight 1.
         let expect = -(3.0 * (0.75f32).ln() + (0.5f32).ln()) / 4.0;
+        assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
+    }
+
+    #[test]
+    fn small_regions_are_lifted_large_ones_and_background_are_not() {
+        // Two 4x3 images: image 0 has a 1-cell class-1 region and a 6-cell class-2
+        // region; image 1 a class-1 region touching image 0's last row only by index.
+        #[rustfmt::skip]
+        let t: Vec<u16> = vec![
+            1, 0, 2, 2,
+            0, 0, 2, 2,
+            0, 0, 2, 2,
+
+            2, 2, 2, 2,
+            0, 0, 0, 0,
+            0, 0, 0, 0,
+        ];
+        let s = small_region_weights(&t, 4, 3, 16.0, 3.0);
+        assert_eq!(s[0], 3.0, "1 cell: sqrt(16) = 4, capped at 3");
+        assert!((s[2] - (16.0f32 / 6.0).sqrt()).abs() < 1e-6, "6 cells: {}", s[2]);
+        assert_eq!(s[12], 2.0, "image 1's 4-cell region is its own region, not joined across images");
+        assert!(s.iter().zip(&t).all(|(w, &c)| c != 0 || *w == 1.0), "background stays 1");
+        assert!(small_region_weights(&t, 4, 3, 16.0, 1.0).iter().all(|&w| w == 1.0), "off");
+        // A region larger than the reference is never weighted down.
+        assert!(small_region_weights(&t, 4, 3, 1.0, 3.0).iter().all(|&w| w == 1.0));
+    }
+
+    #[test]
+    fn scaled_cross_entropy_weights_cells() {
+        let device = Device::flex();
+        let l = Tensor::<4>::from_data(TensorData::new(vec![0.0f32, 0.0, 3f32.ln(), 0.0], [1, 2, 1, 2]), &device);
+        let loss = weighted_cross_entropy_scaled(l, &[1, 0], &[1.0, 3.0], Some(&[2.0, 1.0]));
+        let v = loss.into_data().try_to_vec::<f32>().unwrap()[0];
+        let expect = -(6.0 * (0.75f32).ln() + (0.5f32).ln()) / 7.0;
         assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
     }
 
