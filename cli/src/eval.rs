@@ -278,16 +278,15 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
                 Some(path) => path.clone(),
                 None => crate::weights::resolve_weights(args.weights.as_deref())?,
             };
-            Some(NetMasks::load(
-                &weights,
-                &objects,
-                args.seg_min_cells,
-                args.seg_max_elongation,
-                args.seg_boundary,
-                args.seg_min_interior,
-                args.seg_voting,
-                args.seg_background_offset,
-            )?)
+            let settings = masks::SegSettings {
+                min_cells: args.seg_min_cells,
+                max_elongation: args.seg_max_elongation,
+                boundary: args.seg_boundary,
+                min_interior: args.seg_min_interior,
+                voting: args.seg_voting,
+                background_offset: args.seg_background_offset,
+            };
+            Some(NetMasks::load(&weights, &objects, &settings)?)
         }
     };
     if let Some(m) = net_masks.as_mut() {

@@ -14,6 +14,18 @@ use fusepose_train::seg::validate::Confusion;
 
 use super::dataset::EvalFrame;
 
+/// `--seg-*` settings of the evaluated segmenter; `None` keeps the engine's
+/// default (see the `SegEngine` setter of each).
+#[derive(Clone, Copy, Debug, Default)]
+pub struct SegSettings {
+    pub min_cells: Option<usize>,
+    pub max_elongation: Option<f32>,
+    pub boundary: Option<Boundary>,
+    pub min_interior: Option<usize>,
+    pub voting: Option<VotingMode>,
+    pub background_offset: Option<f32>,
+}
+
 /// The segmenter with its label buffer and accumulated scores.
 pub struct NetMasks {
     engine: SegEngine,
@@ -36,18 +48,10 @@ impl NetMasks {
         self.engine.set_instance_separation(separation);
     }
 
-    /// Loads the segmenter of `weights` (a network file with one embedded, or a segmenter file).
-    /// `min_cells`: see `SegEngine::set_min_component_cells` (`None`: the engine's default).
-    pub fn load(
-        weights: &Path,
-        objects: &ObjectSet,
-        min_cells: Option<usize>,
-        max_elongation: Option<f32>,
-        boundary: Option<Boundary>,
-        min_interior: Option<usize>,
-        voting: Option<VotingMode>,
-        background_offset: Option<f32>,
-    ) -> anyhow::Result<Self> {
+    /// Loads the segmenter of `weights` (a network file with one embedded, or
+    /// a segmenter file) with `settings` applied over the engine's defaults.
+    pub fn load(weights: &Path, objects: &ObjectSet, settings: &SegSettings) -> anyhow::Result<Self> {
+        let SegSettings { min_cells, max_elongation, boundary, min_interior, voting, background_offset } = *settings;
         let mut engine = SegEngine::load(weights, objects)
             .with_context(|| format!("--masks net: loading the segmenter of {}", weights.display()))?;
         if let Some(n) = min_cells {
