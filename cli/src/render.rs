@@ -125,7 +125,7 @@ impl std::str::FromStr for CountRange {
 }
 
 /// A probability in 0..=1.
-fn probability(s: &str) -> Result<f64, String> {
+pub(crate) fn probability(s: &str) -> Result<f64, String> {
     match s.trim().parse::<f64>() {
         Ok(p) if (0.0..=1.0).contains(&p) => Ok(p),
         _ => Err(format!("'{s}' is not a probability between 0 and 1")),

@@ -139,6 +139,14 @@ pub struct Args {
     /// training default; `--single-instances` draws each class at most once.
     #[arg(long)]
     pub single_instances: bool,
+    /// Probability that a training scene holds a pair of identical objects
+    /// side by side (default 0.35, as `render --pairs`).
+    #[arg(long, value_name = "P", value_parser = crate::render::probability)]
+    pub pairs: Option<f64>,
+    /// Probability that a training scene holds a heap of 4-8 touching copies
+    /// of one object (default 0.15, as `render --heap`).
+    #[arg(long, value_name = "P", value_parser = crate::render::probability)]
+    pub heap: Option<f64>,
     /// With randomisation on, the share of training scenes drawn plain
     /// (randomisation off, basic sensor) so accuracy on clean images holds.
     #[arg(long, default_value_t = SamplerConfig::training().plain_share)]
@@ -184,6 +192,12 @@ pub fn training_sampler(args: &Args) -> SamplerConfig {
         plain_share: args.plain_share,
         ..SamplerConfig::training()
     };
+    if let Some(p) = args.pairs {
+        s.pair_probability = p;
+    }
+    if let Some(p) = args.heap {
+        s.heap_probability = p;
+    }
     if args.single_instances {
         s.instances_per_class = (1, 1);
         s.pair_probability = 0.0;
@@ -359,5 +373,16 @@ mod tests {
         assert!(err.contains("would overwrite") && err.contains("--out models/<name>.safetensors"), "{err}");
         assert_eq!(args(&["--intrinsics", "realsense-d435"]).intrinsics.fx, 615.0);
         assert_eq!(training_sampler(&args(&["--intrinsics", "realsense-d435"])).intrinsics.fx, 615.0);
+    }
+
+    #[test]
+    fn pairs_and_heaps_set_the_multi_instance_scenes_and_single_instances_wins() {
+        let default = training_sampler(&args(&[]));
+        assert_eq!((default.pair_probability, default.heap_probability), (0.35, 0.15));
+        let more = training_sampler(&args(&["--pairs", "0.5", "--heap", "0.3"]));
+        assert_eq!((more.pair_probability, more.heap_probability), (0.5, 0.3));
+        let single = training_sampler(&args(&["--pairs", "0.5", "--single-instances"]));
+        assert_eq!((single.pair_probability, single.heap_probability, single.instances_per_class), (0.0, 0.0, (1, 1)));
+        assert!(Cmd::try_parse_from(["train", "--heap", "1.5"]).is_err(), "a probability above 1 is refused");
     }
 }
