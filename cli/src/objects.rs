@@ -18,44 +18,44 @@ pub struct Args {
     command: Command,
 }
 
+/// The object set both subcommands work on.
+#[derive(clap::Args)]
+struct SetArgs {
+    /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
+    #[arg(long, default_value = "builtin")]
+    objects: String,
+    /// Metres per mesh-file unit (0.001 for millimetre models); not applied to `builtin`
+    #[arg(long, default_value_t = 1.0)]
+    scale: f64,
+    /// Declare symmetries as `train --symmetry` does (shown by `list`, written by `export`)
+    #[arg(long = "symmetry", value_name = "NAME=KIND")]
+    symmetry: Vec<SymmetrySpec>,
+}
+
 #[derive(clap::Subcommand)]
 enum Command {
     /// Print each object: class id, name, triangles, diameter (mm), symmetry, and the
     /// symmetry its geometry suggests; then any mesh-check warnings.
     List {
-        /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
-        #[arg(long, default_value = "builtin")]
-        objects: String,
-        /// Metres per mesh-file unit (0.001 for millimetre models); not applied to `builtin`
-        #[arg(long, default_value_t = 1.0)]
-        scale: f64,
-        /// Show the listing with these symmetries declared (as `train --symmetry` would)
-        #[arg(long = "symmetry", value_name = "NAME=KIND")]
-        symmetry: Vec<SymmetrySpec>,
+        #[command(flatten)]
+        set: SetArgs,
     },
     /// Write an object set as fusepose loads it to DIR: DIR/NAME/NAME.{obj,mtl,png}
     /// (metres, the object frame fusepose's poses refer to) and DIR/models_info.json.
     Export {
         /// Output folder (created if missing; existing files are overwritten).
         dir: PathBuf,
-        /// Object set: `builtin` or a folder with one subfolder or .obj/.ply file per object.
-        #[arg(long, default_value = "builtin")]
-        objects: String,
-        /// Metres per mesh-file unit (0.001 for millimetre models); not applied to `builtin`
-        #[arg(long, default_value_t = 1.0)]
-        scale: f64,
-        /// Symmetries written to models_info.json (as `train --symmetry`)
-        #[arg(long = "symmetry", value_name = "NAME=KIND")]
-        symmetry: Vec<SymmetrySpec>,
+        #[command(flatten)]
+        set: SetArgs,
     },
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     match args.command {
-        Command::List { objects, scale, symmetry } => print_listing(&objects, scale, &symmetry),
-        Command::Export { dir, objects, scale, symmetry } => {
-            let mut set = load_set(&objects, scale)?.0;
-            apply_symmetry_specs(&mut set, &symmetry)?;
+        Command::List { set } => print_listing(&set.objects, set.scale, &set.symmetry),
+        Command::Export { dir, set: args } => {
+            let mut set = load_set(&args.objects, args.scale)?.0;
+            apply_symmetry_specs(&mut set, &args.symmetry)?;
             let info = export_objects(&set, &dir).with_context(|| format!("exporting to {}", dir.display()))?;
             println!("wrote {} objects and {}", set.len(), info.display());
             Ok(())
