@@ -167,10 +167,9 @@ fn a_background_offset_labels_more_cells_as_objects_and_zero_is_the_argmax() {
     engine.set_min_interior_cells(0);
     engine.set_max_elongation(0.0);
     let (c, d) = frame_planes(0);
-    let mut plain = vec![0u16; 640 * 480];
-    engine.segment(&view(&c, &d), &mut plain).unwrap();
     let objects = |l: &[u16]| l.iter().filter(|&&v| v != 0).count();
     // The cell argmax of the raw logits, before any offset.
+    let mut plain = vec![0u16; 640 * 480];
     engine.set_background_offset(0.0);
     engine.segment(&view(&c, &d), &mut plain).unwrap();
     let logits = engine.logits().to_vec();
