@@ -209,6 +209,8 @@ pub struct Args {
     pub verify_max_plane_continuation: Option<f32>,
     #[arg(long)]
     pub verify_max_depth_continuity: Option<f32>,
+    #[arg(long)]
+    pub verify_min_thin_mask_agreement: Option<f32>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -506,6 +508,10 @@ impl Runner {
                         min_inlier_fraction: args.verify_min_inliers.unwrap_or(d.min_inlier_fraction),
                         min_depth_support: args.verify_min_depth_support.unwrap_or(d.min_depth_support),
                         max_plane_continuation: args.verify_max_plane_continuation.unwrap_or(d.max_plane_continuation),
+                        max_depth_continuity: args.verify_max_depth_continuity.unwrap_or(d.max_depth_continuity),
+                        min_thin_mask_agreement: args
+                            .verify_min_thin_mask_agreement
+                            .unwrap_or(d.min_thin_mask_agreement),
                         ..d
                     },
                 )
@@ -645,7 +651,7 @@ impl Runner {
                     }
                     let (under_class, _) = under.iter().enumerate().max_by_key(|&(_, n)| *n).unwrap_or((0, &0));
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} fit {:.3} res {:.4}",
+                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -660,6 +666,7 @@ impl Runner {
                         v.depth_support,
                         v.plane_continuation,
                         v.depth_continuity,
+                        v.mask_agreement,
                         v.fit,
                         v.depth_residual_m
                     );

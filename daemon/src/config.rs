@@ -199,6 +199,10 @@ pub struct EstimatorConfig {
     /// Most share of a mask's border where the depth goes on smoothly (any
     /// surface shape; `VerifyConfig::max_depth_continuity`).
     pub verify_max_depth_continuity: f32,
+    /// For objects thinner than 2.5 cm, instead of depth continuity: least
+    /// share of the model's depth-agreeing surface inside the mask
+    /// (`VerifyConfig::min_thin_mask_agreement`).
+    pub verify_min_thin_mask_agreement: f32,
     /// Regions of one class whose points fit inside one object (within this
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
@@ -327,6 +331,7 @@ impl Default for EstimatorConfig {
             verify_min_depth_support: fusepose_estimator::verify::VerifyConfig::default().min_depth_support,
             verify_max_plane_continuation: fusepose_estimator::verify::VerifyConfig::default().max_plane_continuation,
             verify_max_depth_continuity: fusepose_estimator::verify::VerifyConfig::default().max_depth_continuity,
+            verify_min_thin_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().min_thin_mask_agreement,
             join_parts: 1.0,
             split_regions: 1.0,
             duplicates: 0.0,
@@ -566,6 +571,7 @@ impl DaemonConfig {
             ("estimator.verify_min_depth_support", e.verify_min_depth_support),
             ("estimator.verify_max_plane_continuation", e.verify_max_plane_continuation),
             ("estimator.verify_max_depth_continuity", e.verify_max_depth_continuity),
+            ("estimator.verify_min_thin_mask_agreement", e.verify_min_thin_mask_agreement),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(invalid(key, v, "must be in 0..=1"));

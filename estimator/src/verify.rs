@@ -23,6 +23,13 @@
 //! mask must not continue in its own plane past most of its border (a box
 //! face "flush with" a table patch explains the patch exactly, but a real
 //! box stands out of the table, so its border steps off the plane).
+//! Objects thinner than [`THIN_OBJECT_M`] (scissors, a plate, a sheet) step
+//! off the table by less than the depth-continuity tolerance, so that term is
+//! not applied to them (still reported); the plane term still is: a thin
+//! object's top lies off the table's plane by more than its tolerance. Where
+//! a thin object lies on a table only the mask can say, so for them the
+//! model's surface that agrees with the depth must mostly lie in the mask
+//! (a thin ghost made up for a small patch of table covers table beyond it).
 //!
 //! Buffers are sized at construction; [`Verifier::verify`] does not allocate.
 
@@ -74,6 +81,10 @@ pub struct VerifyConfig {
     /// share of its border (any shape: a table's edge, a wall's corner) has
     /// no object standing out of it: every pose of it fails. 1 = off.
     pub max_depth_continuity: f32,
+    /// For objects thinner than [`THIN_OBJECT_M`] (instead of
+    /// `max_depth_continuity`): poses where less than this share of the
+    /// model samples agreeing with the depth lie in the mask fail. 0 = off.
+    pub min_thin_mask_agreement: f32,
 }
 
 impl Default for VerifyConfig {
@@ -91,6 +102,7 @@ impl Default for VerifyConfig {
             min_depth_support: 0.6,
             max_plane_continuation: 0.5,
             max_depth_continuity: 0.8,
+            min_thin_mask_agreement: 0.4,
         }
     }
 }
@@ -122,12 +134,14 @@ pub struct Verification {
     /// Share of the mask's border samples where the depth goes on smoothly
     /// past it ([`VerifyConfig::max_depth_continuity`]).
     pub depth_continuity: f32,
+    /// Inlier samples (model surface agreeing with the depth) that lie in the
+    /// mask / inlier samples ([`VerifyConfig::min_thin_mask_agreement`]).
+    pub mask_agreement: f32,
     /// Samples judged (inliers + outliers).
     pub judged_cells: u32,
-    /// Whether the pose passed [`VerifyConfig::min_inlier_fraction`],
-    /// [`VerifyConfig::min_fit`], [`VerifyConfig::max_behind_fraction`] and
-    /// [`VerifyConfig::max_residual_m`], [`VerifyConfig::min_depth_support`]
-    /// and [`VerifyConfig::max_plane_continuation`].
+    /// Whether the pose passed every threshold of [`VerifyConfig`] (depth
+    /// continuity for objects at least [`THIN_OBJECT_M`] thick, mask
+    /// agreement for thinner ones).
     pub passed: bool,
 }
 
@@ -151,6 +165,32 @@ pub struct Verifier {
     zbuf: Vec<f32>,
     /// In-mask residuals of the current pose (capacity: the most samples of a class).
     residuals: Vec<f32>,
+    /// Per class (id − 1): thinner than [`THIN_OBJECT_M`], so depth continuity does not apply.
+    thin: Vec<bool>,
+}
+
+/// Objects whose thinnest extent is below this (metres) step off a table by
+/// about the depth-continuity tolerance (1 cm + 1 % of the depth), so a real
+/// one lying flat looks to it like a marking on the table.
+pub const THIN_OBJECT_M: f32 = 0.025;
+
+/// The object's extent along the direction it is thinnest in (metres): the
+/// spread of its surface samples along their principal axis of least variance.
+pub fn thinnest_extent(samples: &[[f32; 3]]) -> f32 {
+    let mut moments = Moments::default();
+    samples.iter().for_each(|&p| moments.add(p));
+    if moments.n < 4.0 {
+        return 0.0;
+    }
+    let mean = moments.s.map(|v| v / moments.n);
+    let cov = nalgebra::Matrix3::from_fn(|i, j| moments.ss[i][j] / moments.n - mean[i] * mean[j]);
+    let eig = nalgebra::SymmetricEigen::new(cov);
+    let axis = eig.eigenvectors.column(eig.eigenvalues.imin());
+    let (lo, hi) = samples.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), p| {
+        let d = axis[0] * (p[0] - mean[0]) + axis[1] * (p[1] - mean[1]) + axis[2] * (p[2] - mean[2]);
+        (lo.min(d), hi.max(d))
+    });
+    hi - lo
 }
 
 impl Verifier {
@@ -162,12 +202,14 @@ impl Verifier {
             .map(|o| o.samples.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]).collect())
             .collect();
         let max_samples = samples.iter().map(Vec::len).max().unwrap_or(0);
+        let thin = samples.iter().map(|s| thinnest_extent(s) < THIN_OBJECT_M).collect();
         Self {
             config: VerifyConfig { grid, ..config },
             samples,
             explained: vec![false; grid * grid],
             zbuf: vec![f32::INFINITY; grid * grid],
             residuals: Vec::with_capacity(max_samples),
+            thin,
         }
     }
 
@@ -178,9 +220,10 @@ impl Verifier {
     /// Checks `pose` against the frame's depth and the instance mask.
     pub fn verify(&mut self, frame: &FrameView<'_>, mask: MaskRef<'_>, pose: &ObjectPose) -> Verification {
         let fail = Verification { depth_residual_m: f32::NAN, ..Verification::default() };
-        let Some(samples) = (pose.class_id as usize).checked_sub(1).and_then(|i| self.samples.get(i)) else {
+        let Some(class) = (pose.class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
             return fail;
         };
+        let (samples, thin) = (&self.samples[class], self.thin[class]);
         let (w, h) = (frame.width(), frame.height());
         if w == 0 || h == 0 || mask.ids.len() < w * h {
             return fail;
@@ -217,7 +260,7 @@ impl Verifier {
         // or occluder, no evidence; within the tolerance = the pose explains it.
         self.explained.fill(false);
         self.zbuf.fill(f32::INFINITY);
-        let (mut inliers, mut outliers) = (0u32, 0u32);
+        let (mut inliers, mut outliers, mut inliers_in_mask) = (0u32, 0u32, 0u32);
         self.residuals.clear();
         for p in samples {
             let Some((u, v, z)) = project(p) else { continue };
@@ -248,6 +291,7 @@ impl Verifier {
                 }
             } else if res >= -tol {
                 inliers += 1;
+                inliers_in_mask += (mask.ids[px] == mask.id) as u32;
                 if let Some(c) = cell {
                     self.explained[c] = true;
                 }
@@ -292,6 +336,7 @@ impl Verifier {
         }
         let judged = inliers + outliers;
         let inlier_fraction = if judged > 0 { inliers as f32 / judged as f32 } else { 0.0 };
+        let mask_agreement = if inliers > 0 { inliers_in_mask as f32 / inliers as f32 } else { 0.0 };
         let mask_coverage = if mask_cells > 0 { mask_covered as f32 / mask_cells as f32 } else { 0.0 };
         let behind_fraction = if front_cells > 0 { behind_cells as f32 / front_cells as f32 } else { 0.0 };
         let depth_residual_m = median(&mut self.residuals);
@@ -336,7 +381,11 @@ impl Verifier {
             && depth_residual_m <= cfg.max_residual_m
             && depth_support >= cfg.min_depth_support
             && plane_continuation <= cfg.max_plane_continuation
-            && depth_continuity <= cfg.max_depth_continuity;
+            && if thin {
+                mask_agreement >= cfg.min_thin_mask_agreement
+            } else {
+                depth_continuity <= cfg.max_depth_continuity
+            };
         Verification {
             fit,
             depth_residual_m,
@@ -347,6 +396,7 @@ impl Verifier {
             depth_support,
             plane_continuation,
             depth_continuity,
+            mask_agreement,
             judged_cells: judged,
             passed,
         }
