@@ -162,6 +162,36 @@ pub struct Args {
     /// `--stage all`: start from random weights instead of the shipped model's trunk.
     #[arg(long, conflicts_with = "warm_start")]
     pub cold: bool,
+    /// `--stage all`: shares of `--minutes` for the pose, segmenter and
+    /// fine-tune stages, e.g. `0.4,0.35,0.2`; at most 0.95 in all (the rest
+    /// pays for validation and the acceptance report).
+    #[arg(long, value_name = "POSE,SEG,TUNE", value_parser = parse_stage_shares, default_value = "0.475,0.2375,0.2375")]
+    pub stage_shares: StageShares,
+}
+
+/// Budget shares of the three trained stages of `--stage all`.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct StageShares(pub [f64; 3]);
+
+fn parse_stage_shares(s: &str) -> Result<StageShares, String> {
+    let parts: Vec<&str> = s.split(',').map(str::trim).collect();
+    let [pose, seg, tune] = parts[..] else {
+        return Err(format!("expected three shares POSE,SEG,TUNE (e.g. 0.4,0.35,0.2), got '{s}'"));
+    };
+    let mut shares = [0.0; 3];
+    for (out, (name, text)) in shares.iter_mut().zip([("POSE", pose), ("SEG", seg), ("TUNE", tune)]) {
+        *out = text.parse::<f64>().map_err(|_| format!("{name} share '{text}' is not a number"))?;
+        if !(out.is_finite() && *out > 0.0) {
+            return Err(format!("{name} share {text} must be above 0 (every stage needs some time)"));
+        }
+    }
+    let sum: f64 = shares.iter().sum();
+    if sum > 0.95 + 1e-9 {
+        return Err(format!(
+            "the shares add up to {sum:.3}; at most 0.95, the rest of --minutes pays for validation and the acceptance report"
+        ));
+    }
+    Ok(StageShares(shares))
 }
 
 impl Args {
@@ -384,5 +414,16 @@ mod tests {
         let single = training_sampler(&args(&["--pairs", "0.5", "--single-instances"]));
         assert_eq!((single.pair_probability, single.heap_probability, single.instances_per_class), (0.0, 0.0, (1, 1)));
         assert!(Cmd::try_parse_from(["train", "--heap", "1.5"]).is_err(), "a probability above 1 is refused");
+    }
+
+    #[test]
+    fn stage_shares_default_to_the_documented_split_and_bad_ones_are_named() {
+        assert_eq!(args(&[]).stage_shares, StageShares([0.475, 0.2375, 0.2375]));
+        assert_eq!(args(&["--stage-shares", "0.4, 0.35,0.2"]).stage_shares, StageShares([0.4, 0.35, 0.2]));
+        let err = |v: &str| Cmd::try_parse_from(["train", "--stage-shares", v]).err().map(|e| e.to_string()).unwrap();
+        assert!(err("0.5,0.5").contains("expected three shares"), "{}", err("0.5,0.5"));
+        assert!(err("0.5,x,0.1").contains("SEG share 'x' is not a number"));
+        assert!(err("0.5,0,0.1").contains("SEG share 0 must be above 0"));
+        assert!(err("0.5,0.3,0.2").contains("add up to 1.000; at most 0.95"));
     }
 }

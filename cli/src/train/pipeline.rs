@@ -1,7 +1,7 @@
 //! `fusepose train --stage all`: one command from a folder of meshes to a
 //! daemon-ready model. It runs every stage itself within the `--minutes`
 //! budget — pose net + refiner (47.5 %), segmenter (23.75 %), fine-tune of
-//! both pose stages on the segmenter's masks (23.75 %), 5 % for validation and the report — then an acceptance
+//! both pose stages on the segmenter's masks (23.75 %; `--stage-shares`), 5 % for validation and the report — then an acceptance
 //! report on a held-out split rendered from the same meshes, and prints the
 //! `fuseposed.toml` lines that serve the model. Finished stages are kept in
 //! the work folder (`<checkpoint-dir>/<out stem>-stages/`), so running the same
@@ -14,10 +14,6 @@ use clap::Parser;
 
 use super::{Args, StageArg};
 
-/// Budget shares of the pose, segmenter and fine-tune stages. The rest
-/// (5 %) pays for the validation after each stage and the acceptance report,
-/// so the whole command ends within `--minutes`.
-const SHARES: [f64; 3] = [0.475, 0.2375, 0.2375];
 /// Render seed of the acceptance split (test-split seeds; training and
 /// validation scenes are drawn from other ranges).
 const ACCEPT_SEED: u64 = 7_340_021;
@@ -57,7 +53,7 @@ impl Work {
 
 pub fn run(args: &Args) -> anyhow::Result<()> {
     let minutes = args.minutes.context(
-        "--stage all needs --minutes (the whole budget, e.g. --minutes 60; stages get 47.5 / 23.75 / 23.75 % of it, the rest is for validation and the report)",
+        "--stage all needs --minutes (the whole budget, e.g. --minutes 60; stages get 47.5 / 23.75 / 23.75 % of it by default, --stage-shares, the rest is for validation and the report)",
     )?;
     if !minutes.is_finite() || minutes <= 0.0 {
         anyhow::bail!("--minutes must be a positive number of minutes, got {minutes}");
@@ -65,7 +61,9 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
     let stem = args.out.file_stem().map_or("model".into(), |s| s.to_string_lossy().into_owned());
     let work = Work { dir: args.checkpoint_dir.join(format!("{stem}-stages")) };
     std::fs::create_dir_all(&work.dir).with_context(|| format!("creating {}", work.dir.display()))?;
-    let [pose_min, seg_min, tune_min] = SHARES.map(|s| s * minutes);
+    // The rest of the budget (at least 5 %) pays for the validation after each
+    // stage and the acceptance report, so the command ends within `--minutes`.
+    let [pose_min, seg_min, tune_min] = args.stage_shares.0.map(|s| s * minutes);
     println!(
         "== training {} -> {} in {minutes:.0} min; work folder {}",
         args.objects,
