@@ -8,8 +8,8 @@ use std::path::{Path, PathBuf};
 use std::time::{Duration, SystemTime};
 
 use hdrhistogram::Histogram;
-use hdrhistogram::serialization::V2DeflateSerializer;
 use hdrhistogram::serialization::interval_log::{IntervalLogWriterBuilder, Tag};
+use hdrhistogram::serialization::{Serializer, V2DeflateSerializer};
 
 /// Writes interval histograms as windows close; flushed after each window.
 pub struct IntervalLog {
@@ -35,6 +35,7 @@ impl IntervalLog {
             .begin_log_with(&mut file, &mut serializer)?;
         writeln!(file, "\"StartTimestamp\",\"Interval_Length\",\"Interval_Max\",\"Interval_Compressed_Histogram\"")?;
         file.flush()?;
+        warm_up(&mut serializer)?;
         Ok(Self { path: path.to_owned(), file, serializer, base_monotonic_ns })
     }
 
@@ -57,6 +58,18 @@ impl IntervalLog {
             .map_err(|e| std::io::Error::other(e.to_string()))?;
         self.file.flush()
     }
+}
+
+/// The serializer sizes (and zero-fills) its buffer for the highest value a
+/// histogram holds, so the first window with a new longest latency (a
+/// deadline miss) would grow the daemon's memory mid-run by hundreds of KiB.
+/// Serializing the largest value the daemon records once at start-up sizes
+/// it for every later window.
+fn warm_up(serializer: &mut V2DeflateSerializer) -> std::io::Result<()> {
+    let mut widest = Histogram::<u64>::new_with_bounds(1, crate::latency::MAX_NS, 3).map_err(std::io::Error::other)?;
+    widest.saturating_record(crate::latency::MAX_NS);
+    serializer.serialize(&widest, &mut std::io::sink()).map_err(|e| std::io::Error::other(format!("{e:?}")))?;
+    Ok(())
 }
 
 #[cfg(test)]
