@@ -66,7 +66,7 @@ impl IntervalLog {
 /// Serializing the largest value the daemon records once at start-up sizes
 /// it for every later window.
 fn warm_up(serializer: &mut V2DeflateSerializer) -> std::io::Result<()> {
-    let mut widest = Histogram::<u64>::new_with_bounds(1, crate::latency::MAX_NS, 3).map_err(std::io::Error::other)?;
+    let mut widest = crate::latency::new_histogram();
     widest.saturating_record(crate::latency::MAX_NS);
     serializer.serialize(&widest, &mut std::io::sink()).map_err(|e| std::io::Error::other(format!("{e:?}")))?;
     Ok(())

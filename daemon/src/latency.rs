@@ -8,9 +8,9 @@ use hdrhistogram::Histogram;
 pub const END_TO_END: usize = STAGE_COUNT;
 
 /// Largest recordable latency: 60 s (larger values are clamped).
-pub const MAX_NS: u64 = 60_000_000_000;
+pub(crate) const MAX_NS: u64 = 60_000_000_000;
 
-fn new_histogram() -> Histogram<u64> {
+pub(crate) fn new_histogram() -> Histogram<u64> {
     Histogram::new_with_bounds(1, MAX_NS, 3).expect("constant histogram bounds are valid")
 }
 

@@ -179,13 +179,7 @@ pub const THIN_OBJECT_M: f32 = 0.025;
 pub fn thinnest_extent(samples: &[[f32; 3]]) -> f32 {
     let mut moments = Moments::default();
     samples.iter().for_each(|&p| moments.add(p));
-    if moments.n < 4.0 {
-        return 0.0;
-    }
-    let mean = moments.s.map(|v| v / moments.n);
-    let cov = nalgebra::Matrix3::from_fn(|i, j| moments.ss[i][j] / moments.n - mean[i] * mean[j]);
-    let eig = nalgebra::SymmetricEigen::new(cov);
-    let axis = eig.eigenvectors.column(eig.eigenvalues.imin());
+    let Some((mean, axis, _)) = moments.least_axis(4.0) else { return 0.0 };
     let (lo, hi) = samples.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), p| {
         let d = axis[0] * (p[0] - mean[0]) + axis[1] * (p[1] - mean[1]) + axis[2] * (p[2] - mean[2]);
         (lo.min(d), hi.max(d))
@@ -539,23 +533,25 @@ impl Moments {
         }
     }
 
-    /// The best-fit plane `n·x = d` (unit `n`) when the points lie within
-    /// `max_rms` of it and there are enough of them; else `None`.
-    fn flat_plane(&self, max_rms: f32) -> Option<([f32; 3], f32)> {
-        if self.n < 12.0 {
+    /// The points' mean, their axis of least variance (unit) and that
+    /// variance; `None` with fewer than `min_points`.
+    fn least_axis(&self, min_points: f32) -> Option<([f32; 3], [f32; 3], f32)> {
+        if self.n < min_points {
             return None;
         }
         let mean = self.s.map(|v| v / self.n);
         let cov = nalgebra::Matrix3::from_fn(|i, j| self.ss[i][j] / self.n - mean[i] * mean[j]);
         let eig = nalgebra::SymmetricEigen::new(cov);
         let k = eig.eigenvalues.imin();
-        let rms = eig.eigenvalues[k].max(0.0).sqrt();
-        if rms > max_rms {
-            return None;
-        }
-        let n = eig.eigenvectors.column(k);
-        let n = [n[0], n[1], n[2]];
-        Some((n, n[0] * mean[0] + n[1] * mean[1] + n[2] * mean[2]))
+        let axis = eig.eigenvectors.column(k);
+        Some((mean, [axis[0], axis[1], axis[2]], eig.eigenvalues[k]))
+    }
+
+    /// The best-fit plane `n·x = d` (unit `n`) when the points lie within
+    /// `max_rms` of it and there are enough of them; else `None`.
+    fn flat_plane(&self, max_rms: f32) -> Option<([f32; 3], f32)> {
+        let (mean, n, variance) = self.least_axis(12.0)?;
+        (variance.max(0.0).sqrt() <= max_rms).then(|| (n, n[0] * mean[0] + n[1] * mean[1] + n[2] * mean[2]))
     }
 }
 
