@@ -211,6 +211,14 @@ pub struct Args {
     pub verify_max_depth_continuity: Option<f32>,
     #[arg(long)]
     pub verify_min_thin_mask_agreement: Option<f32>,
+    /// Mask agreement from which a pose passes with the looser inlier and fit
+    /// minimums below (above 1 = off).
+    #[arg(long)]
+    pub verify_agreeing_mask_agreement: Option<f32>,
+    #[arg(long)]
+    pub verify_agreeing_min_inliers: Option<f32>,
+    #[arg(long)]
+    pub verify_agreeing_min_fit: Option<f32>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -512,6 +520,13 @@ impl Runner {
                         min_thin_mask_agreement: args
                             .verify_min_thin_mask_agreement
                             .unwrap_or(d.min_thin_mask_agreement),
+                        agreeing_mask_agreement: args
+                            .verify_agreeing_mask_agreement
+                            .unwrap_or(d.agreeing_mask_agreement),
+                        agreeing_min_inlier_fraction: args
+                            .verify_agreeing_min_inliers
+                            .unwrap_or(d.agreeing_min_inlier_fraction),
+                        agreeing_min_fit: args.verify_agreeing_min_fit.unwrap_or(d.agreeing_min_fit),
                         ..d
                     },
                 )

@@ -110,6 +110,11 @@ pub struct Args {
     /// Only time the inference engine (weights from --resume, else random) and exit.
     #[arg(long)]
     pub bench_engine: bool,
+    /// Only time training-frame generation for these objects and flags (scene
+    /// draw, render with the sensor model, crops and point clouds; one thread,
+    /// 40 frames) and exit.
+    #[arg(long)]
+    pub bench_data: bool,
     /// Hide the progress bar.
     #[arg(long)]
     pub quiet: bool,
@@ -117,6 +122,11 @@ pub struct Args {
     /// segmenter embedded in the --resume file instead of the ground truth.
     #[arg(long, default_value_t = 0.0)]
     pub seg_masks: f64,
+    /// Training samples per object per rendered frame: each one draws its own
+    /// point subset and augmentation from the same render, so rendering costs
+    /// less per sample (1..=8).
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
+    pub views_per_frame: u8,
     /// Train only on objects at least this visible (share of the silhouette, 0..1).
     #[arg(long, default_value_t = 0.1)]
     pub min_visible: f64,
@@ -198,11 +208,8 @@ impl Args {
     /// The stage asked for, or the default for these flags (see `--stage`).
     pub fn stage(&self) -> StageArg {
         let fresh_mesh_folder = self.objects != "builtin" && self.resume.is_none() && self.dataset.is_none();
-        self.stage.unwrap_or(if fresh_mesh_folder && !self.validate_only && !self.bench_engine {
-            StageArg::All
-        } else {
-            StageArg::Both
-        })
+        let only_measures = self.validate_only || self.bench_engine || self.bench_data;
+        self.stage.unwrap_or(if fresh_mesh_folder && !only_measures { StageArg::All } else { StageArg::Both })
     }
 }
 
@@ -241,6 +248,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         && args.out == Path::new(crate::weights::SHIPPED_WEIGHTS)
         && !args.validate_only
         && !args.bench_engine
+        && !args.bench_data
     {
         anyhow::bail!(
             "--out defaults to the shipped built-in model ({}), which training '{}' would overwrite: \
@@ -259,6 +267,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     if args.bench_engine {
         return bench(&set, args.resume.as_deref());
+    }
+    if args.bench_data {
+        return bench_data(&set, &args);
     }
     let source = match &args.dataset {
         Some(dir) => Source::bop(&crate::dataset_path::resolve_bop_split(dir, &args.split)?, &set)?,
@@ -313,12 +324,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.randomize,
             args.depth_sensor,
             if args.single_instances { "one copy per class" } else { "several copies per class" }
-        ),
+        ) + &if args.views_per_frame > 1 {
+            format!(", {} samples per object per rendered frame", args.views_per_frame)
+        } else {
+            String::new()
+        },
         source,
         progress: !args.quiet,
         seg_masks: args.seg_masks,
         min_visible: args.min_visible,
         sampler,
+        views_per_frame: args.views_per_frame as usize,
     };
     let summary = train(Arc::new(set), &opts)?;
     println!(
@@ -377,6 +393,33 @@ fn bench(set: &fusepose_scene::ObjectSet, weights: Option<&std::path::Path>) -> 
     Ok(())
 }
 
+/// `--bench-data`: what one training frame costs the data thread, and per sample.
+fn bench_data(set: &fusepose_scene::ObjectSet, args: &Args) -> anyhow::Result<()> {
+    let cfg = fusepose_estimator::net::NetConfig::new(set.len());
+    let data = fusepose_train::data::DataConfig {
+        num_points: args.points.unwrap_or(cfg.num_points),
+        crop_size: args.crop.unwrap_or(cfg.crop_size),
+        min_points: 32,
+        min_visible: args.min_visible,
+        augment: true,
+        sampler: training_sampler(args),
+        views_per_frame: args.views_per_frame as usize,
+    };
+    let r = fusepose_train::bench::data_speed(set, &data, 1_000_000_001, 40)?;
+    println!(
+        "{} frames, {:.2} samples per frame; median ms per frame: scene {:.1}, render {:.1}, whole frame {:.1} \
+         (crops and clouds {:.1}); {:.1} ms per sample",
+        r.frames,
+        r.samples_per_frame,
+        r.scene_ms,
+        r.render_ms,
+        r.frame_ms,
+        r.frame_ms - r.scene_ms - r.render_ms,
+        r.ms_per_sample()
+    );
+    Ok(())
+}
+
 #[cfg(test)]
 mod tests {
     use clap::Parser;
@@ -414,6 +457,15 @@ mod tests {
         let single = training_sampler(&args(&["--pairs", "0.5", "--single-instances"]));
         assert_eq!((single.pair_probability, single.heap_probability, single.instances_per_class), (0.0, 0.0, (1, 1)));
         assert!(Cmd::try_parse_from(["train", "--heap", "1.5"]).is_err(), "a probability above 1 is refused");
+    }
+
+    #[test]
+    fn one_sample_per_object_and_frame_unless_asked_and_at_most_eight() {
+        assert_eq!(args(&[]).views_per_frame, 1);
+        assert_eq!(args(&["--views-per-frame", "2"]).views_per_frame, 2);
+        for bad in ["0", "9"] {
+            assert!(Cmd::try_parse_from(["train", "--views-per-frame", bad]).is_err(), "{bad} is refused");
+        }
     }
 
     #[test]

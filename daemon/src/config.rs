@@ -203,6 +203,11 @@ pub struct EstimatorConfig {
     /// share of the model's depth-agreeing surface inside the mask
     /// (`VerifyConfig::min_thin_mask_agreement`).
     pub verify_min_thin_mask_agreement: f32,
+    /// A pose of an object at least 15 cm across with at least this share of
+    /// its depth-agreeing surface inside the mask is only imprecise, not a
+    /// ghost: it needs just 0.3 inliers and 0.25 fit
+    /// (`VerifyConfig::agreeing_mask_agreement`). Above 1 = off.
+    pub verify_agreeing_mask_agreement: f32,
     /// Regions of one class whose points fit inside one object (within this
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
@@ -332,6 +337,7 @@ impl Default for EstimatorConfig {
             verify_max_plane_continuation: fusepose_estimator::verify::VerifyConfig::default().max_plane_continuation,
             verify_max_depth_continuity: fusepose_estimator::verify::VerifyConfig::default().max_depth_continuity,
             verify_min_thin_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().min_thin_mask_agreement,
+            verify_agreeing_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().agreeing_mask_agreement,
             join_parts: 1.0,
             split_regions: 1.0,
             duplicates: 0.0,
@@ -577,6 +583,13 @@ impl DaemonConfig {
                 return Err(invalid(key, v, "must be in 0..=1"));
             }
         }
+        if !(e.verify_agreeing_mask_agreement.is_finite() && e.verify_agreeing_mask_agreement >= 0.0) {
+            return Err(invalid(
+                "estimator.verify_agreeing_mask_agreement",
+                e.verify_agreeing_mask_agreement,
+                "must be a number >= 0 (above 1 turns it off)",
+            ));
+        }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
         }
@@ -660,6 +673,19 @@ mod tests {
         assert_eq!(c.estimator.kind, EstimatorKind::Net, "the shipped config runs the shipped network");
         // Sizes come from the weight file and threads from the machine unless overridden.
         assert_eq!((c.estimator.num_points, c.estimator.crop_size, c.estimator.worker_threads), (None, None, None));
+    }
+
+    #[test]
+    fn the_agreeing_mask_slack_is_checked_and_can_be_turned_off() {
+        let default = DaemonConfig::default().estimator.verify_agreeing_mask_agreement;
+        assert_eq!(default, fusepose_estimator::verify::VerifyConfig::default().agreeing_mask_agreement);
+        let off = DaemonConfig::parse("[estimator]\nverify_agreeing_mask_agreement = 1.5\n").unwrap();
+        assert_eq!(off.estimator.verify_agreeing_mask_agreement, 1.5, "above 1 is allowed: off");
+        let err = DaemonConfig::parse("[estimator]\nverify_agreeing_mask_agreement = -0.1\n").unwrap_err().to_string();
+        assert!(
+            err.starts_with("estimator.verify_agreeing_mask_agreement") && err.contains("above 1 turns it off"),
+            "{err}"
+        );
     }
 
     #[test]

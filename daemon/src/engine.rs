@@ -141,6 +141,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
                 max_plane_continuation: config.verify_max_plane_continuation,
                 max_depth_continuity: config.verify_max_depth_continuity,
                 min_thin_mask_agreement: config.verify_min_thin_mask_agreement,
+                agreeing_mask_agreement: config.verify_agreeing_mask_agreement,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));

@@ -31,6 +31,15 @@
 //! model's surface that agrees with the depth must mostly lie in the mask
 //! (a thin ghost made up for a small patch of table covers table beyond it).
 //!
+//! That share, the mask agreement, also tells an imprecise pose from a
+//! ghost: a pose 1–3 cm off its object leaves many samples off the depth,
+//! but those that agree lie in its mask, where a ghost's agreeing surface
+//! spills past the region it was made up for. Poses of objects at least
+//! 15 cm across that agree this well pass with looser inlier and fit
+//! minimums ([`VerifyConfig::agreeing_mask_agreement`]): a small rotation
+//! error moves the far parts of a large object out of the depth tolerance,
+//! while on a small object a pose 3 cm off can still agree inside its mask.
+//!
 //! Buffers are sized at construction; [`Verifier::verify`] does not allocate.
 
 use fusepose_scene::ObjectSet;
@@ -85,6 +94,19 @@ pub struct VerifyConfig {
     /// `max_depth_continuity`): poses where less than this share of the
     /// model samples agreeing with the depth lie in the mask fail. 0 = off.
     pub min_thin_mask_agreement: f32,
+    /// A pose of an object at least [`Self::agreeing_min_diameter_m`] across
+    /// whose depth-agreeing samples lie this much in the mask (mask
+    /// agreement) is where the mask says the object is, only imprecise: it
+    /// passes with the looser [`Self::agreeing_min_inlier_fraction`] and
+    /// [`Self::agreeing_min_fit`] instead of `min_inlier_fraction` and
+    /// `min_fit` (every other term still applies). Above 1 = off.
+    pub agreeing_mask_agreement: f32,
+    pub agreeing_min_inlier_fraction: f32,
+    pub agreeing_min_fit: f32,
+    /// Smaller objects keep the strict minimums: on them a pose 3 cm off can
+    /// keep most of its agreeing samples in the mask, and a small rotation
+    /// error moves few samples out of the depth tolerance (metres).
+    pub agreeing_min_diameter_m: f32,
 }
 
 impl Default for VerifyConfig {
@@ -103,6 +125,10 @@ impl Default for VerifyConfig {
             max_plane_continuation: 0.5,
             max_depth_continuity: 0.8,
             min_thin_mask_agreement: 0.4,
+            agreeing_mask_agreement: 0.75,
+            agreeing_min_inlier_fraction: 0.3,
+            agreeing_min_fit: 0.25,
+            agreeing_min_diameter_m: 0.15,
         }
     }
 }
@@ -167,6 +193,8 @@ pub struct Verifier {
     residuals: Vec<f32>,
     /// Per class (id − 1): thinner than [`THIN_OBJECT_M`], so depth continuity does not apply.
     thin: Vec<bool>,
+    /// Per class (id − 1): diameter, metres.
+    diameters: Vec<f32>,
 }
 
 /// Objects whose thinnest extent is below this (metres) step off a table by
@@ -204,6 +232,7 @@ impl Verifier {
             zbuf: vec![f32::INFINITY; grid * grid],
             residuals: Vec::with_capacity(max_samples),
             thin,
+            diameters: objects.objects.iter().map(|o| o.diameter as f32).collect(),
         }
     }
 
@@ -367,9 +396,18 @@ impl Verifier {
             _ => 0.0,
         };
         let fit = inlier_fraction * mask_coverage * (1.0 - behind_fraction) * (1.0 - off_plane);
+        // A pose 1-3 cm off leaves many samples off the depth; when the samples
+        // that do agree lie in the mask, the pose is on the object, not on a ghost region.
+        let agreeing = mask_agreement >= cfg.agreeing_mask_agreement
+            && self.diameters.get(class).is_some_and(|&d| d >= cfg.agreeing_min_diameter_m);
+        let (min_inliers, min_fit) = if agreeing {
+            (cfg.agreeing_min_inlier_fraction.min(cfg.min_inlier_fraction), cfg.agreeing_min_fit.min(cfg.min_fit))
+        } else {
+            (cfg.min_inlier_fraction, cfg.min_fit)
+        };
         let passed = off_plane <= cfg.max_off_plane
-            && inlier_fraction >= cfg.min_inlier_fraction
-            && fit >= cfg.min_fit
+            && inlier_fraction >= min_inliers
+            && fit >= min_fit
             && behind_fraction <= cfg.max_behind_fraction
             && depth_residual_m.is_finite()
             && depth_residual_m <= cfg.max_residual_m

@@ -1,5 +1,7 @@
-//! Engine speed: milliseconds per object and achieved GFLOP/s of the shipped
-//! inference engine (`NetEstimator`) on synthetic inputs of the network's N and S.
+//! Speeds the trainer depends on: milliseconds per object and achieved
+//! GFLOP/s of the shipped inference engine (`NetEstimator`) on synthetic
+//! inputs of the network's N and S, and the cost of one rendered training
+//! frame (scene draw, render, sample extraction) for an object set.
 
 use std::time::Instant;
 
@@ -79,6 +81,68 @@ pub fn engine_speed(
         refine_iterations: iters,
         ms_per_object: per_obj * 1000.0,
         gflops: c.flops_per_object(n, s, iters) / per_obj / 1e9,
+    })
+}
+
+/// What one rendered training frame costs on the calling thread.
+#[derive(Clone, Debug)]
+pub struct DataSpeed {
+    pub frames: usize,
+    /// Training samples (object views) per frame, mean.
+    pub samples_per_frame: f64,
+    /// Median ms per frame: drawing the scene (`sample_scene`).
+    pub scene_ms: f64,
+    /// Median ms per frame: rendering it with the training sensor model.
+    pub render_ms: f64,
+    /// Median ms per frame: the whole of [`crate::data::frame_samples`]
+    /// (draw + render + crops and point clouds).
+    pub frame_ms: f64,
+}
+
+impl DataSpeed {
+    /// CPU ms of data generation per training sample.
+    pub fn ms_per_sample(&self) -> f64 {
+        self.frame_ms / self.samples_per_frame.max(1e-9)
+    }
+}
+
+/// Times `frames` training frames (seeds `first_seed..`) as the trainer's data
+/// thread makes them: the whole frame, and its scene draw and render alone
+/// (run again on the same seed, so the shares are of the same work).
+pub fn data_speed(
+    set: &ObjectSet,
+    cfg: &crate::data::DataConfig,
+    first_seed: u64,
+    frames: usize,
+) -> anyhow::Result<DataSpeed> {
+    use fusepose_scene::render::{NoiseConfig, RenderTarget};
+    use fusepose_scene::sampler::{LabelKind, render_view_labelled, sample_scene};
+    let mut ws = crate::data::workspace(set, cfg)?;
+    let mut target = RenderTarget::for_intrinsics(&cfg.sampler.intrinsics);
+    let median = |mut v: Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v.get(v.len() / 2).copied().unwrap_or(f64::NAN) * 1000.0
+    };
+    let (mut scene_t, mut render_t, mut frame_t) = (Vec::new(), Vec::new(), Vec::new());
+    let mut samples = 0usize;
+    for seed in first_seed..first_seed + frames as u64 {
+        let t0 = Instant::now();
+        samples += crate::data::frame_samples(set, cfg, seed, &mut ws, &mut target, None)?.len();
+        frame_t.push(t0.elapsed().as_secs_f64());
+        let t0 = Instant::now();
+        let Ok(scene) = sample_scene(set, &cfg.sampler, seed) else { continue };
+        scene_t.push(t0.elapsed().as_secs_f64());
+        let t0 = Instant::now();
+        let k = cfg.sampler.intrinsics;
+        render_view_labelled(&scene, set, 0, &k, &NoiseConfig::default(), LabelKind::Instance, &mut target)?;
+        render_t.push(t0.elapsed().as_secs_f64());
+    }
+    Ok(DataSpeed {
+        frames,
+        samples_per_frame: samples as f64 / frames.max(1) as f64,
+        scene_ms: median(scene_t),
+        render_ms: median(render_t),
+        frame_ms: median(frame_t),
     })
 }
 

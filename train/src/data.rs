@@ -73,6 +73,26 @@ pub struct DataConfig {
     pub augment: bool,
     /// How rendered scenes are drawn (randomisation, depth sensor, copies per class).
     pub sampler: SamplerConfig,
+    /// Samples per object per rendered frame (1 = one). Each further one
+    /// draws its own point subset and augmentation from the same render, so
+    /// the render's cost is shared by `views_per_frame` samples.
+    pub views_per_frame: usize,
+}
+
+impl DataConfig {
+    /// Plain default scenes, one sample per object, no augmentation: the
+    /// network inputs exactly as the estimator prepares them.
+    pub fn unaugmented(num_points: usize, crop_size: usize) -> Self {
+        Self {
+            num_points,
+            crop_size,
+            min_points: 32,
+            min_visible: 0.2,
+            augment: false,
+            sampler: SamplerConfig::default(),
+            views_per_frame: 1,
+        }
+    }
 }
 
 /// Tiny Gaussian helper (Box–Muller), so no extra dependency is needed.
@@ -199,7 +219,13 @@ pub fn frame_samples(
             max_offset: from_segmenter.then(|| set.by_class(o.class_id).map(|m| m.diameter)).flatten(),
         })
         .collect();
-    samples_from_frame(&frame, &truths, Some(target.labels()), cfg, seed, ws)
+    let mut out = samples_from_frame(&frame, &truths, Some(target.labels()), cfg, seed, ws)?;
+    for view in 1..cfg.views_per_frame.max(1) as u64 {
+        // Seeds of further views stay clear of the frame seeds (consecutive integers).
+        let view_seed = seed ^ view.wrapping_mul(0x9e37_79b9_7f4a_7c15);
+        out.extend(samples_from_frame(&frame, &truths, Some(target.labels()), cfg, view_seed, ws)?);
+    }
+    Ok(out)
 }
 
 /// Loads BOP frame `index` and returns its samples.

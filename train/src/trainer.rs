@@ -87,6 +87,8 @@ pub struct TrainOptions {
     /// How rendered training scenes are drawn (randomisation, depth sensor,
     /// copies per class); validation always uses the plain default scenes.
     pub sampler: fusepose_scene::sampler::SamplerConfig,
+    /// Samples per object per rendered frame ([`DataConfig::views_per_frame`]).
+    pub views_per_frame: usize,
 }
 
 /// What a finished run reports.
@@ -202,6 +204,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         min_visible: opts.min_visible,
         augment: true,
         sampler: opts.sampler.clone(),
+        views_per_frame: opts.views_per_frame,
     };
     // Training scenes: a per-seed, per-resume range far from the validation seeds.
     let first_seed = (opts.seed % 1000) * 1_000_000_000 + start_steps * 7 + 1;

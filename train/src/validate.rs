@@ -39,6 +39,7 @@ pub fn validation_set(
         min_visible: 0.2,
         augment: false,
         sampler: Default::default(),
+        views_per_frame: 1,
     };
     let mut ws = workspace(set, &cfg)?;
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);

@@ -61,6 +61,7 @@ fn bop_frames_become_samples_matched_to_their_ground_truth() {
         min_visible: 0.3,
         augment: false,
         sampler: Default::default(),
+        views_per_frame: 1,
     };
     let mut ws = workspace(&set, &cfg).unwrap();
     let mut total = 0;

@@ -26,14 +26,7 @@ fn segmenter_masks_give_other_points_of_the_same_objects() {
     let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
     let set = builtin_objects();
     let engine = || SegEngine::load(&weights, &set).expect("the shipped model embeds a segmenter");
-    let dc = DataConfig {
-        num_points: 256,
-        crop_size: 64,
-        min_points: 32,
-        min_visible: 0.2,
-        augment: false,
-        sampler: Default::default(),
-    };
+    let dc = DataConfig::unaugmented(256, 64);
     let mut ws = workspace(&set, &dc).unwrap();
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
     let mut always = SegMasks::new(engine(), 1.0);

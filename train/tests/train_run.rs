@@ -45,6 +45,7 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
         seg_masks: 0.5,
         min_visible: 0.1,
         sampler: Default::default(),
+        views_per_frame: 1,
     };
     let summary = train(Arc::new(builtin_objects()), &opts).unwrap();
     assert_eq!(summary.record.steps, start + 2);

@@ -27,6 +27,7 @@ fn samples(set: &ObjectSet, cfg: &NetConfig, want: usize) -> Vec<Sample> {
         min_visible: 0.2,
         augment: true,
         sampler: Default::default(),
+        views_per_frame: 1,
     };
     let mut ws = workspace(set, &dc).unwrap();
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
