@@ -396,25 +396,26 @@ fn bench(set: &fusepose_scene::ObjectSet, weights: Option<&std::path::Path>) -> 
 /// `--bench-data`: what one training frame costs the data thread, and per sample.
 fn bench_data(set: &fusepose_scene::ObjectSet, args: &Args) -> anyhow::Result<()> {
     let cfg = fusepose_estimator::net::NetConfig::new(set.len());
+    // As the trainer's data thread makes them (`fusepose_train::trainer::train`).
     let data = fusepose_train::data::DataConfig {
-        num_points: args.points.unwrap_or(cfg.num_points),
-        crop_size: args.crop.unwrap_or(cfg.crop_size),
-        min_points: 32,
         min_visible: args.min_visible,
         augment: true,
         sampler: training_sampler(args),
         views_per_frame: args.views_per_frame as usize,
+        ..fusepose_train::data::DataConfig::unaugmented(
+            args.points.unwrap_or(cfg.num_points),
+            args.crop.unwrap_or(cfg.crop_size),
+        )
     };
     let r = fusepose_train::bench::data_speed(set, &data, 1_000_000_001, 40)?;
     println!(
-        "{} frames, {:.2} samples per frame; median ms per frame: scene {:.1}, render {:.1}, whole frame {:.1} \
-         (crops and clouds {:.1}); {:.1} ms per sample",
+        "{} frames, {:.2} samples per frame; median ms per frame: scene {:.1}, render {:.1}, whole frame {:.1}; \
+         {:.1} ms per sample",
         r.frames,
         r.samples_per_frame,
         r.scene_ms,
         r.render_ms,
         r.frame_ms,
-        r.frame_ms - r.scene_ms - r.render_ms,
         r.ms_per_sample()
     );
     Ok(())

@@ -398,8 +398,8 @@ impl Verifier {
         let fit = inlier_fraction * mask_coverage * (1.0 - behind_fraction) * (1.0 - off_plane);
         // A pose 1-3 cm off leaves many samples off the depth; when the samples
         // that do agree lie in the mask, the pose is on the object, not on a ghost region.
-        let agreeing = mask_agreement >= cfg.agreeing_mask_agreement
-            && self.diameters.get(class).is_some_and(|&d| d >= cfg.agreeing_min_diameter_m);
+        let agreeing =
+            mask_agreement >= cfg.agreeing_mask_agreement && self.diameters[class] >= cfg.agreeing_min_diameter_m;
         let (min_inliers, min_fit) = if agreeing {
             (cfg.agreeing_min_inlier_fraction.min(cfg.min_inlier_fraction), cfg.agreeing_min_fit.min(cfg.min_fit))
         } else {

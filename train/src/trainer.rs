@@ -198,13 +198,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     ));
 
     let data_cfg = DataConfig {
-        num_points: cfg.num_points,
-        crop_size: cfg.crop_size,
-        min_points: 32,
         min_visible: opts.min_visible,
         augment: true,
         sampler: opts.sampler.clone(),
         views_per_frame: opts.views_per_frame,
+        ..DataConfig::unaugmented(cfg.num_points, cfg.crop_size)
     };
     // Training scenes: a per-seed, per-resume range far from the validation seeds.
     let first_seed = (opts.seed % 1000) * 1_000_000_000 + start_steps * 7 + 1;

@@ -32,15 +32,7 @@ pub fn validation_set(
     frames: usize,
     max_samples: usize,
 ) -> anyhow::Result<Vec<Sample>> {
-    let cfg = DataConfig {
-        num_points,
-        crop_size,
-        min_points: 32,
-        min_visible: 0.2,
-        augment: false,
-        sampler: Default::default(),
-        views_per_frame: 1,
-    };
+    let cfg = DataConfig::unaugmented(num_points, crop_size);
     let mut ws = workspace(set, &cfg)?;
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
     let mut out = Vec::new();

@@ -54,15 +54,7 @@ fn bop_frames_become_samples_matched_to_their_ground_truth() {
     assert_eq!(bop_indices(&ds, true), vec![0, 10]);
     assert_eq!(bop_indices(&ds, false).len(), 9);
 
-    let cfg = DataConfig {
-        num_points: 256,
-        crop_size: 64,
-        min_points: 32,
-        min_visible: 0.3,
-        augment: false,
-        sampler: Default::default(),
-        views_per_frame: 1,
-    };
+    let cfg = DataConfig { min_visible: 0.3, ..DataConfig::unaugmented(256, 64) };
     let mut ws = workspace(&set, &cfg).unwrap();
     let mut total = 0;
     for i in 0..3 {

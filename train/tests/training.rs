@@ -20,15 +20,7 @@ use fusepose_train::model::FusionNet;
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 fn samples(set: &ObjectSet, cfg: &NetConfig, want: usize) -> Vec<Sample> {
-    let dc = DataConfig {
-        num_points: cfg.num_points,
-        crop_size: cfg.crop_size,
-        min_points: 32,
-        min_visible: 0.2,
-        augment: true,
-        sampler: Default::default(),
-        views_per_frame: 1,
-    };
+    let dc = DataConfig { augment: true, ..DataConfig::unaugmented(cfg.num_points, cfg.crop_size) };
     let mut ws = workspace(set, &dc).unwrap();
     let mut target = RenderTarget::for_intrinsics(&Intrinsics::YCB_VIDEO);
     let mut out = Vec::new();
