@@ -36,6 +36,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use fusepose_estimator::net::{NetEstimator, NetOptions};
+use fusepose_estimator::seg::SegEngine;
 use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
 use fusepose_estimator::{
     ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
@@ -193,6 +194,12 @@ pub struct Args {
     /// `estimator.max_interpenetration` (1 = off).
     #[arg(long, default_value_t = fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE)]
     pub max_interpenetration: f32,
+    /// Of two verified poses where one's model explains more than this share
+    /// of the other's region, the one more explained by the other is
+    /// dropped, as the daemon's `estimator.max_explained_share` (1 = off;
+    /// needs verification).
+    #[arg(long, default_value_t = fusepose_estimator::explained::DEFAULT_MAX_SHARE)]
+    pub max_explained: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -219,6 +226,10 @@ pub struct Args {
     pub verify_agreeing_min_inliers: Option<f32>,
     #[arg(long)]
     pub verify_agreeing_min_fit: Option<f32>,
+    /// `--masks net`: poses whose region the segmenter gave their class with a
+    /// mean probability below this fail (0 = off).
+    #[arg(long)]
+    pub verify_min_region_probability: Option<f32>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -325,6 +336,10 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
         }
         for runner in &mut runners {
+            let seg_engine = match (runner.masks, &net_masks) {
+                (MaskSource::Net, Some(seg)) => Some(seg.engine()),
+                _ => None,
+            };
             let labels = match (runner.masks, &net_masks) {
                 (MaskSource::Net, Some(seg)) => seg.plane(),
                 (MaskSource::GtInstances, _) => {
@@ -332,7 +347,7 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
                 }
                 _ => LabelPlane::U16(&frame.labels),
             };
-            runner.evaluate(&frame, labels, args.seed.wrapping_add(index as u64), &metrics)?;
+            runner.evaluate(&frame, labels, seg_engine, args.seed.wrapping_add(index as u64), &metrics)?;
         }
         if let (Some(dir), Some(last)) = (&args.overlay, runners.last()) {
             let labels = match (last.masks, &net_masks) {
@@ -434,6 +449,9 @@ struct Runner {
     max_interpenetration: f32,
     solids: std::sync::Arc<fusepose_estimator::interpenetration::Solids>,
     interpenetrating: usize,
+    /// `--max-explained` and the poses it dropped.
+    max_explained: f32,
+    explained: usize,
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -527,6 +545,7 @@ impl Runner {
                             .verify_agreeing_min_inliers
                             .unwrap_or(d.agreeing_min_inlier_fraction),
                         agreeing_min_fit: args.verify_agreeing_min_fit.unwrap_or(d.agreeing_min_fit),
+                        min_region_probability: args.verify_min_region_probability.unwrap_or(d.min_region_probability),
                         ..d
                     },
                 )
@@ -538,6 +557,8 @@ impl Runner {
             max_interpenetration: args.max_interpenetration,
             solids: solids.clone(),
             interpenetrating: 0,
+            max_explained: args.max_explained,
+            explained: 0,
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -551,6 +572,7 @@ impl Runner {
         &mut self,
         frame: &EvalFrame,
         labels: LabelPlane<'_>,
+        seg: Option<&SegEngine>,
         seed: u64,
         metrics: &[ObjectMetric],
     ) -> anyhow::Result<()> {
@@ -578,7 +600,8 @@ impl Runner {
             self.instance_counts.add_frame(&frame.instances, self.workspace.component_ids(), &ids);
         }
         if estimated.is_ok() {
-            self.verify(&view, frame, metrics);
+            self.verify(&view, frame, seg, metrics);
+            self.suppress_explained(&view);
             self.suppress_duplicates();
             self.suppress_interpenetrating();
         }
@@ -634,17 +657,28 @@ impl Runner {
     /// Verifies every pose against the frame's depth, counts what fails
     /// (ghosts vs poses of real objects, judged by matching before the drop)
     /// and, with `--verify drop`, removes the failures.
-    fn verify(&mut self, view: &FrameView<'_>, frame: &EvalFrame, metrics: &[ObjectMetric]) {
+    fn verify(&mut self, view: &FrameView<'_>, frame: &EvalFrame, seg: Option<&SegEngine>, metrics: &[ObjectMetric]) {
         let Some(verifier) = self.verifier.as_mut() else { return };
         let start = Instant::now();
         let ws = &self.workspace;
+        let min_region_probability = verifier.config().min_region_probability;
         let verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
             .poses
             .as_slice()
             .iter()
             .map(|p| {
-                ws.component_id(p.instance_id as usize)
-                    .map(|id| verifier.verify(view, MaskRef { ids: ws.component_ids(), id, bbox: p.bbox }, p))
+                ws.component_id(p.instance_id as usize).map(|id| {
+                    let mask = MaskRef { ids: ws.component_ids(), id, bbox: p.bbox };
+                    let mut v = verifier.verify(view, mask, p);
+                    // Only the built-in segmenter's regions carry a class probability.
+                    if let Some(seg) = seg {
+                        v.judge_region_probability(
+                            seg.region_probability(mask.ids, id, p.class_id, p.bbox),
+                            min_region_probability,
+                        );
+                    }
+                    v
+                })
             })
             .collect();
         let passed: Vec<bool> = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
@@ -665,8 +699,9 @@ impl Runner {
                         }
                     }
                     let (under_class, _) = under.iter().enumerate().max_by_key(|&(_, n)| *n).unwrap_or((0, &0));
+                    let sprob = v.region_probability;
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4}",
+                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -683,7 +718,10 @@ impl Runner {
                         v.depth_continuity,
                         v.mask_agreement,
                         v.fit,
-                        v.depth_residual_m
+                        v.depth_residual_m,
+                        sprob,
+                        p.confidence,
+                        v.passed as u8
                     );
                 }
             }
@@ -732,6 +770,25 @@ impl Runner {
     }
 
     /// Drops the pose more inside another ([`fusepose_estimator::interpenetration`]), as the daemon.
+    fn suppress_explained(&mut self, view: &FrameView<'_>) {
+        let Some(verifier) = self.verifier.as_mut() else { return };
+        let ws = &self.workspace;
+        let mask_of = |p: &ObjectPose| {
+            ws.component_id(p.instance_id as usize).map(|id| MaskRef { ids: ws.component_ids(), id, bbox: p.bbox })
+        };
+        let mut dropped = Vec::new();
+        self.explained += fusepose_estimator::explained::suppress(
+            verifier,
+            view,
+            mask_of,
+            &mut self.poses,
+            self.max_explained,
+            &self.scores,
+            &mut dropped,
+        );
+        fusepose_estimator::poses::remove_marked(&mut self.scores, &dropped);
+    }
+
     fn suppress_interpenetrating(&mut self) {
         let mut dropped = Vec::new();
         self.interpenetrating +=
@@ -765,6 +822,7 @@ impl Runner {
             println!("poses dropped as duplicates: {}", self.duplicates);
         }
         println!("poses dropped inside another: {}", self.interpenetrating);
+        println!("poses dropped as explained by another: {}", self.explained);
         if self.instance_counts.truth > 0 {
             println!("{}", self.instance_counts.summary());
         }

@@ -208,6 +208,10 @@ pub struct EstimatorConfig {
     /// ghost: it needs just 0.3 inliers and 0.25 fit
     /// (`VerifyConfig::agreeing_mask_agreement`). Above 1 = off.
     pub verify_agreeing_mask_agreement: f32,
+    /// With the built-in segmenter: a pose whose region the segmenter nowhere
+    /// gave its class with at least this probability fails (the segmenter
+    /// made the region up; `VerifyConfig::min_region_probability`). 0 = off.
+    pub verify_min_region_probability: f32,
     /// Regions of one class whose points fit inside one object (within this
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
@@ -225,6 +229,11 @@ pub struct EstimatorConfig {
     /// overlap by more than this share, the one more inside the other is
     /// dropped (`fusepose_estimator::interpenetration`). 1 = off.
     pub max_interpenetration: f32,
+    /// One surface, one object: of two verified poses where one's model
+    /// explains more than this share of the other's region, the one more
+    /// explained by the other is dropped (`fusepose_estimator::explained`).
+    /// Needs verification. 1 = off.
+    pub max_explained_share: f32,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -338,10 +347,12 @@ impl Default for EstimatorConfig {
             verify_max_depth_continuity: fusepose_estimator::verify::VerifyConfig::default().max_depth_continuity,
             verify_min_thin_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().min_thin_mask_agreement,
             verify_agreeing_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().agreeing_mask_agreement,
+            verify_min_region_probability: fusepose_estimator::verify::VerifyConfig::default().min_region_probability,
             join_parts: 1.0,
             split_regions: 1.0,
             duplicates: 0.0,
             max_interpenetration: fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE,
+            max_explained_share: fusepose_estimator::explained::DEFAULT_MAX_SHARE,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             pin_cpus: Vec::new(),
@@ -551,6 +562,13 @@ impl DaemonConfig {
                 "must be in 0.05..=1 (1 = off)",
             ));
         }
+        if !(e.max_explained_share.is_finite() && (0.05..=1.0).contains(&e.max_explained_share)) {
+            return Err(invalid(
+                "estimator.max_explained_share",
+                e.max_explained_share,
+                "must be in 0.05..=1 (1 = off)",
+            ));
+        }
         if !(e.duplicates.is_finite() && (0.0..=2.0).contains(&e.duplicates)) {
             return Err(invalid("estimator.duplicates", e.duplicates, "must be in 0..=2 (0 = off)"));
         }
@@ -578,6 +596,7 @@ impl DaemonConfig {
             ("estimator.verify_max_plane_continuation", e.verify_max_plane_continuation),
             ("estimator.verify_max_depth_continuity", e.verify_max_depth_continuity),
             ("estimator.verify_min_thin_mask_agreement", e.verify_min_thin_mask_agreement),
+            ("estimator.verify_min_region_probability", e.verify_min_region_probability),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(invalid(key, v, "must be in 0..=1"));
@@ -689,6 +708,16 @@ mod tests {
     }
 
     #[test]
+    fn the_region_probability_minimum_is_checked() {
+        let default = DaemonConfig::default().estimator.verify_min_region_probability;
+        assert_eq!(default, fusepose_estimator::verify::VerifyConfig::default().min_region_probability);
+        let off = DaemonConfig::parse("[estimator]\nverify_min_region_probability = 0\n").unwrap();
+        assert_eq!(off.estimator.verify_min_region_probability, 0.0);
+        let err = DaemonConfig::parse("[estimator]\nverify_min_region_probability = 1.2\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.verify_min_region_probability") && err.contains("0..=1"), "{err}");
+    }
+
+    #[test]
     fn mask_sources_parse_and_default_to_auto() {
         assert_eq!(DaemonConfig::parse("").unwrap().estimator.masks, MaskSource::Auto);
         let c = DaemonConfig::parse("[estimator]\nmasks = \"net\"\n").unwrap();
@@ -719,6 +748,8 @@ mod tests {
         assert_eq!(DaemonConfig::parse("[estimator]\nduplicates = 0.5\n").unwrap().estimator.duplicates, 0.5);
         let err = DaemonConfig::parse("[estimator]\nmax_interpenetration = 0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.max_interpenetration") && err.contains("1 = off"), "{err}");
+        let err = DaemonConfig::parse("[estimator]\nmax_explained_share = 1.5\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.max_explained_share") && err.contains("1 = off"), "{err}");
         let err = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_boundary"), "{err}");
         let err = DaemonConfig::parse("[estimator]\nseg_voting = \"no\"\n").unwrap_err().to_string();

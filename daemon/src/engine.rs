@@ -50,6 +50,9 @@ pub struct EngineSpec {
     pub separations: Vec<f32>,
     /// Object solids and `estimator.max_interpenetration` (None = off).
     pub interpenetration: Option<(Arc<Solids>, f32)>,
+    /// `estimator.max_explained_share`: of two verified poses, the one whose
+    /// region the other explains more than this is dropped (1 = off).
+    pub max_explained: f32,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
     /// What the segmenter does with a centre-offset head (`estimator.seg_voting`).
@@ -142,6 +145,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
                 max_depth_continuity: config.verify_max_depth_continuity,
                 min_thin_mask_agreement: config.verify_min_thin_mask_agreement,
                 agreeing_mask_agreement: config.verify_agreeing_mask_agreement,
+                min_region_probability: config.verify_min_region_probability,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
@@ -149,6 +153,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.cut_limits = CutLimits::new(&objects, config.split_regions);
         spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
+        spec.max_explained = config.max_explained_share;
         if config.max_interpenetration < 1.0 {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
         }
@@ -192,6 +197,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             cut_limits: CutLimits::default(),
             separations: Vec::new(),
             interpenetration: None,
+            max_explained: 1.0,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             startup_cost: None,
@@ -212,6 +218,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             cut_limits: CutLimits::default(),
             separations: Vec::new(),
             interpenetration: None,
+            max_explained: 1.0,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             startup_cost: None,
@@ -298,6 +305,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         cut_limits: CutLimits::default(),
         separations: Vec::new(),
         interpenetration: None,
+        max_explained: 1.0,
         seg_boundary: Boundary::default(),
         seg_voting: VotingMode::Off,
         startup_cost,
@@ -342,6 +350,8 @@ pub struct PoseEngine {
     separations: Vec<f32>,
     /// Object solids and `estimator.max_interpenetration` (None = off).
     interpenetration: Option<(Arc<Solids>, f32)>,
+    /// `estimator.max_explained_share` (1 = off).
+    max_explained: f32,
     scores: Vec<f32>,
     duplicate_marks: Vec<bool>,
     /// The verification of each pose in `poses` (same order), when verifying.
@@ -369,9 +379,12 @@ const POST_ESTIMATE_GAIN: f64 = 0.1;
 /// Checks each pose against the frame's depth and its instance mask into
 /// `verdicts` (same order) and returns how many failed; with `drop` removes
 /// those poses. No allocation.
+/// `segmenter`: the built-in segmenter when it made this frame's regions (its
+/// class probabilities are judged too).
 fn verify_poses(
     verifier: Option<&mut Verifier>,
     ws: Option<&Workspace>,
+    segmenter: Option<&SegEngine>,
     poses: &mut PoseSet,
     verdicts: &mut Vec<Verification>,
     drop: bool,
@@ -379,10 +392,23 @@ fn verify_poses(
 ) -> usize {
     verdicts.clear();
     let (Some(verifier), Some(ws)) = (verifier, ws) else { return 0 };
+    let min_region_probability = verifier.config().min_region_probability;
     for pose in poses.as_slice() {
         let v = match ws.component_id(pose.instance_id as usize) {
-            Some(id) => verifier.verify(frame, MaskRef { ids: ws.component_ids(), id, bbox: pose.bbox }, pose),
-            None => Verification { depth_residual_m: f32::NAN, ..Verification::default() },
+            Some(id) => {
+                let mask = MaskRef { ids: ws.component_ids(), id, bbox: pose.bbox };
+                let mut v = verifier.verify(frame, mask, pose);
+                if let Some(seg) = segmenter.filter(|_| min_region_probability > 0.0) {
+                    v.judge_region_probability(
+                        seg.region_probability(mask.ids, id, pose.class_id, pose.bbox),
+                        min_region_probability,
+                    );
+                }
+                v
+            }
+            None => {
+                Verification { depth_residual_m: f32::NAN, region_probability: f32::NAN, ..Verification::default() }
+            }
         };
         verdicts.push(v);
     }
@@ -410,6 +436,32 @@ fn drop_duplicates(
     }
     rank(poses, verdicts, scores);
     let dropped = fusepose_estimator::duplicates::suppress(poses, separations, scores, marks);
+    forget_dropped(dropped, verdicts, marks);
+}
+
+/// Drops poses whose region another pose explains
+/// (`fusepose_estimator::explained`), keeping `verdicts` in step. Needs
+/// verification (its verifier, and verdicts to rank by). No allocation.
+#[allow(clippy::too_many_arguments)] // the engine's parts, borrowed one by one
+fn drop_explained(
+    verifier: Option<&mut Verifier>,
+    ws: Option<&Workspace>,
+    poses: &mut PoseSet,
+    verdicts: &mut Vec<Verification>,
+    max_share: f32,
+    frame: &FrameView<'_>,
+    scores: &mut Vec<f32>,
+    marks: &mut Vec<bool>,
+) {
+    let (Some(verifier), Some(ws)) = (verifier, ws) else { return };
+    if max_share >= 1.0 || poses.len() < 2 {
+        return;
+    }
+    rank(poses, verdicts, scores);
+    let mask_of = |p: &ObjectPose| {
+        ws.component_id(p.instance_id as usize).map(|id| MaskRef { ids: ws.component_ids(), id, bbox: p.bbox })
+    };
+    let dropped = fusepose_estimator::explained::suppress(verifier, frame, mask_of, poses, max_share, scores, marks);
     forget_dropped(dropped, verdicts, marks);
 }
 
@@ -498,6 +550,7 @@ impl PoseEngine {
             verdicts: Vec::with_capacity(max_instances),
             separations: spec.separations.clone(),
             interpenetration: spec.interpenetration.clone(),
+            max_explained: spec.max_explained,
             scores: Vec::with_capacity(max_instances),
             duplicate_marks: Vec::with_capacity(max_instances),
             rejected: 0,
@@ -529,6 +582,7 @@ impl PoseEngine {
             verdicts: Vec::new(),
             separations: Vec::new(),
             interpenetration: None,
+            max_explained: 1.0,
             scores: Vec::new(),
             duplicate_marks: Vec::new(),
             rejected: 0,
@@ -547,6 +601,7 @@ impl PoseEngine {
         };
         // Segment when the frame brings no labels (`auto`) or always (`net`).
         let segmented;
+        let mut used_segmenter = false;
         let frame = match self.segmenter.as_mut() {
             Some(seg) if self.masks == MaskSource::Net || frame.labels.is_none() => {
                 let ts = fusepose_client::monotonic_ns();
@@ -573,6 +628,7 @@ impl PoseEngine {
                     LabelPlane::U16(&self.labels)
                 };
                 segmented = FrameView { labels: Some(labels), ..*frame };
+                used_segmenter = true;
                 &segmented
             }
             _ => frame,
@@ -594,15 +650,34 @@ impl PoseEngine {
             Ok(()) => {
                 self.poses.retain_confident(self.min_confidence);
                 let estimated = self.poses.len();
+                // The segmenter is shared by the cameras of this spec, which
+                // run one frame at a time: its logits are still this frame's.
+                let seg = self
+                    .segmenter
+                    .as_ref()
+                    .filter(|_| used_segmenter)
+                    .map(|s| s.lock().unwrap_or_else(|e| e.into_inner()));
                 self.failed_verification = verify_poses(
                     self.verifier.as_mut(),
                     self.workspace.as_ref(),
+                    seg.as_deref(),
                     &mut self.poses,
                     &mut self.verdicts,
                     self.verify_drop,
                     frame,
                 );
+                drop(seg);
                 self.rejected = if self.verify_drop { self.failed_verification } else { 0 };
+                drop_explained(
+                    self.verifier.as_mut(),
+                    self.workspace.as_ref(),
+                    &mut self.poses,
+                    &mut self.verdicts,
+                    self.max_explained,
+                    frame,
+                    &mut self.scores,
+                    &mut self.duplicate_marks,
+                );
                 // Counted by `fusepose eval`; the stats message has no field for it.
                 drop_duplicates(
                     &mut self.poses,

@@ -182,35 +182,16 @@ impl Solids {
     /// pose count; no allocation within its capacity), removes them from
     /// `poses` and returns how many. `max_share` ≥ 1 never drops.
     pub fn suppress(&self, poses: &mut PoseSet, max_share: f32, scores: &[f32], dropped: &mut Vec<bool>) -> usize {
-        let all = poses.as_slice();
-        dropped.clear();
-        dropped.resize(all.len(), false);
-        if max_share.is_nan() || max_share >= 1.0 || all.len() < 2 {
-            return 0;
-        }
-        let score = |i: usize| scores.get(i).copied().filter(|s| !s.is_nan()).unwrap_or(f32::NEG_INFINITY);
-        let iso = |i: usize| {
-            nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(all[i].translation), all[i].rotation)
+        let iso = |p: &crate::poses::ObjectPose| {
+            nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(p.translation), p.rotation)
         };
-        for i in 0..all.len() {
-            for j in i + 1..all.len() {
-                let (pi, pj) = (iso(i), iso(j));
-                let in_j = self.share_inside(all[i].class_id, &pi, all[j].class_id, &pj);
-                let in_i = self.share_inside(all[j].class_id, &pj, all[i].class_id, &pi);
-                if in_j.max(in_i) <= max_share {
-                    continue;
-                }
-                let loser = if (in_j - in_i).abs() > 0.1 {
-                    if in_j > in_i { i } else { j }
-                } else if score(j) < score(i) {
-                    j
-                } else {
-                    i
-                };
-                dropped[loser] = true;
-            }
-        }
-        poses.remove_marked(dropped)
+        crate::poses::drop_pairwise(poses, max_share, scores, dropped, false, |a, b| {
+            let (pa, pb) = (iso(a), iso(b));
+            Some((
+                self.share_inside(a.class_id, &pa, b.class_id, &pb),
+                self.share_inside(b.class_id, &pb, a.class_id, &pa),
+            ))
+        })
     }
 }
 

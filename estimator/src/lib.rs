@@ -11,6 +11,7 @@
 
 pub mod cpu_pin;
 pub mod duplicates;
+pub mod explained;
 pub mod frame;
 pub mod icp;
 pub mod instances;

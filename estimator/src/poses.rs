@@ -32,6 +32,50 @@ pub fn remove_marked<T>(items: &mut Vec<T>, dropped: &[bool]) -> usize {
     dropped.iter().filter(|&&d| d).count()
 }
 
+/// Pairwise suppression shared by the physical checks: for every two poses
+/// `(i, j)`, `shares` gives how much of `i` the other claims and how much of
+/// `j` (None: not judged). Where either exceeds `max_share`, the pose claimed
+/// more is marked in `dropped` (resized to the pose count; equal within 0.1:
+/// the lower `scores`, NaN lowest); with `skip_dropped` a marked pose is not
+/// compared again. Removes the marked poses and returns how many. `max_share`
+/// ≥ 1 (or NaN) never drops. No allocation within `dropped`'s capacity.
+pub fn drop_pairwise(
+    poses: &mut PoseSet,
+    max_share: f32,
+    scores: &[f32],
+    dropped: &mut Vec<bool>,
+    skip_dropped: bool,
+    mut shares: impl FnMut(&ObjectPose, &ObjectPose) -> Option<(f32, f32)>,
+) -> usize {
+    let all = poses.as_slice();
+    dropped.clear();
+    dropped.resize(all.len(), false);
+    if max_share.is_nan() || max_share >= 1.0 || all.len() < 2 {
+        return 0;
+    }
+    let score = |i: usize| scores.get(i).copied().filter(|s| !s.is_nan()).unwrap_or(f32::NEG_INFINITY);
+    for i in 0..all.len() {
+        for j in i + 1..all.len() {
+            if skip_dropped && (dropped[i] || dropped[j]) {
+                continue;
+            }
+            let Some((of_i, of_j)) = shares(&all[i], &all[j]) else { continue };
+            if of_i.max(of_j) <= max_share {
+                continue;
+            }
+            let loser = if (of_i - of_j).abs() > 0.1 {
+                if of_i > of_j { i } else { j }
+            } else if score(j) < score(i) {
+                j
+            } else {
+                i
+            };
+            dropped[loser] = true;
+        }
+    }
+    poses.remove_marked(dropped)
+}
+
 /// The poses of one frame; capacity fixed at construction so filling it never allocates.
 #[derive(Clone, Debug)]
 pub struct PoseSet {

@@ -40,6 +40,13 @@
 //! error moves the far parts of a large object out of the depth tolerance,
 //! while on a small object a pose 3 cm off can still agree inside its mask.
 //!
+//! Where the built-in segmenter made the region, its own certainty is a
+//! last term ([`Verification::judge_region_probability`]): a region in which
+//! it nowhere gave the pose's class a high probability is one it made up, a
+//! class-coloured patch or a piece of another object that some pose of the
+//! class may still fit. [`Verifier::explained_share`] measures how much of
+//! one region another pose's model explains ([`crate::explained`]).
+//!
 //! Buffers are sized at construction; [`Verifier::verify`] does not allocate.
 
 use fusepose_scene::ObjectSet;
@@ -107,6 +114,12 @@ pub struct VerifyConfig {
     /// keep most of its agreeing samples in the mask, and a small rotation
     /// error moves few samples out of the depth tolerance (metres).
     pub agreeing_min_diameter_m: f32,
+    /// Poses on a region of the built-in segmenter whose peak probability of
+    /// the pose's class is below this fail
+    /// ([`Verification::judge_region_probability`]; regions from other
+    /// sources are not judged). 0 = off; default 0.8, chosen on the tuning
+    /// splits (docs/BENCHMARKS.md, session 19).
+    pub min_region_probability: f32,
 }
 
 impl Default for VerifyConfig {
@@ -129,6 +142,7 @@ impl Default for VerifyConfig {
             agreeing_min_inlier_fraction: 0.3,
             agreeing_min_fit: 0.25,
             agreeing_min_diameter_m: 0.15,
+            min_region_probability: 0.8,
         }
     }
 }
@@ -163,6 +177,9 @@ pub struct Verification {
     /// Inlier samples (model surface agreeing with the depth) that lie in the
     /// mask / inlier samples ([`VerifyConfig::min_thin_mask_agreement`]).
     pub mask_agreement: f32,
+    /// The segmenter's peak probability of the pose's class in its region
+    /// ([`Verification::judge_region_probability`]); NaN when not judged.
+    pub region_probability: f32,
     /// Samples judged (inliers + outliers).
     pub judged_cells: u32,
     /// Whether the pose passed every threshold of [`VerifyConfig`] (depth
@@ -195,6 +212,8 @@ pub struct Verifier {
     thin: Vec<bool>,
     /// Per class (id − 1): diameter, metres.
     diameters: Vec<f32>,
+    /// Per class (id − 1): farthest surface sample from the object's origin, metres.
+    radii: Vec<f32>,
 }
 
 /// Objects whose thinnest extent is below this (metres) step off a table by
@@ -227,12 +246,16 @@ impl Verifier {
         let thin = samples.iter().map(|s| thinnest_extent(s) < THIN_OBJECT_M).collect();
         Self {
             config: VerifyConfig { grid, ..config },
-            samples,
             explained: vec![false; grid * grid],
             zbuf: vec![f32::INFINITY; grid * grid],
             residuals: Vec::with_capacity(max_samples),
             thin,
             diameters: objects.objects.iter().map(|o| o.diameter as f32).collect(),
+            radii: samples
+                .iter()
+                .map(|s| s.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).fold(0.0, f32::max))
+                .collect(),
+            samples,
         }
     }
 
@@ -242,7 +265,7 @@ impl Verifier {
 
     /// Checks `pose` against the frame's depth and the instance mask.
     pub fn verify(&mut self, frame: &FrameView<'_>, mask: MaskRef<'_>, pose: &ObjectPose) -> Verification {
-        let fail = Verification { depth_residual_m: f32::NAN, ..Verification::default() };
+        let fail = Verification { depth_residual_m: f32::NAN, region_probability: f32::NAN, ..Verification::default() };
         let Some(class) = (pose.class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
             return fail;
         };
@@ -429,9 +452,118 @@ impl Verifier {
             plane_continuation,
             depth_continuity,
             mask_agreement,
+            region_probability: f32::NAN,
             judged_cells: judged,
             passed,
         }
+    }
+}
+
+impl Verification {
+    /// Adds the segmenter's peak probability `p` of the pose's class in its
+    /// region (`SegEngine::region_probability`): below `min` the pose fails.
+    /// A region the segmenter was nowhere sure of is where it makes objects
+    /// up (a class-coloured patch, part of another object), and the depth
+    /// may still agree with some pose there (docs/BENCHMARKS.md, session 19).
+    pub fn judge_region_probability(&mut self, p: f32, min: f32) {
+        self.region_probability = p;
+        if p < min {
+            self.passed = false;
+        }
+    }
+}
+
+impl Verifier {
+    /// Share of `mask`'s region that `other` explains: mask cells (on a grid
+    /// over the mask's box; centre pixel in the mask, with a depth reading)
+    /// with a sample of `other`'s model, at its pose, agreeing with the
+    /// measured depth in their 3x3 neighbourhood. A region that lies on
+    /// another object's visible surface is that object's, whatever class the
+    /// segmenter gave it ([`crate::explained`]). 0 for an unknown class or
+    /// an empty mask.
+    pub fn explained_share(&mut self, frame: &FrameView<'_>, mask: MaskRef<'_>, other: &ObjectPose) -> f32 {
+        let Some(class) = (other.class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
+            return 0.0;
+        };
+        let (w, h) = (frame.width(), frame.height());
+        if w == 0 || h == 0 || mask.ids.len() < w * h {
+            return 0.0;
+        }
+        let k = &frame.intrinsics;
+        let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+        let [u0, v0, u1, v1] = mask.bbox.map(|v| v as f32);
+        let (u1, v1) = (u1.min((w - 1) as f32), v1.min((h - 1) as f32));
+        if !(u1 >= u0 && v1 >= v0) {
+            return 0.0;
+        }
+        // Skip the samples when the object's bounding sphere (radius r about
+        // its origin) projects off the mask's box: a point dx, dz off the
+        // centre c moves f·(dx·c.z − c.x·dz) / (c.z·(c.z + dz)) pixels from
+        // its projection, at most f·r·(c.z + |c.x|) / (c.z·(c.z − r)).
+        let (r, c) = (self.radii[class], other.translation.map(|v| v as f32));
+        if c.z - r > 1e-3 {
+            let reach = |f: f32, lateral: f32| f * r * (c.z + lateral.abs()) / (c.z * (c.z - r));
+            let (su, sv) = (fx * c.x / c.z + cx, fy * c.y / c.z + cy);
+            let (ru, rv) = (reach(fx, c.x), reach(fy, c.y));
+            if su + ru < u0 || su - ru > u1 || sv + rv < v0 || sv - rv > v1 {
+                return 0.0;
+            }
+        }
+        self.explained_share_of_samples(frame, mask, other, class)
+    }
+
+    fn explained_share_of_samples(
+        &mut self,
+        frame: &FrameView<'_>,
+        mask: MaskRef<'_>,
+        other: &ObjectPose,
+        class: usize,
+    ) -> f32 {
+        let (w, h) = (frame.width(), frame.height());
+        let k = &frame.intrinsics;
+        let m = other.rotation.to_rotation_matrix().matrix().map(|v| v as f32);
+        let t = other.translation.map(|v| v as f32);
+        let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+        let [u0, v0, u1, v1] = mask.bbox.map(|v| v as f32);
+        let (u1, v1) = (u1.min((w - 1) as f32), v1.min((h - 1) as f32));
+        let g = self.config.grid;
+        let (cw, ch) = ((u1 - u0 + 1.0) / g as f32, (v1 - v0 + 1.0) / g as f32);
+        let cfg = self.config;
+        self.explained.fill(false);
+        for p in &self.samples[class] {
+            let z = m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2];
+            if !(z > 1e-3 && z.is_finite()) {
+                continue;
+            }
+            let x = m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0];
+            let y = m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1];
+            let (u, v) = (fx * x / z + cx, fy * y / z + cy);
+            let (gx, gy) = ((u - u0 + 0.5) / cw, (v - v0 + 0.5) / ch);
+            if !(gx >= 0.0 && gy >= 0.0 && gx < g as f32 && gy < g as f32) {
+                continue;
+            }
+            let (pu, pv) = (u.round() as usize, v.round() as usize);
+            let Some(z_obs) = frame.depth.metres(pv.min(h - 1) * w + pu.min(w - 1)) else { continue };
+            if (z_obs - z).abs() <= cfg.tolerance_base_m + cfg.tolerance_per_m * z {
+                self.explained[gy as usize * g + gx as usize] = true;
+            }
+        }
+        let (mut cells, mut covered) = (0u32, 0u32);
+        for gy in 0..g {
+            let v = ((v0 + (gy as f32 + 0.5) * ch - 0.5).round() as usize).min(h - 1);
+            for gx in 0..g {
+                let u = ((u0 + (gx as f32 + 0.5) * cw - 0.5).round() as usize).min(w - 1);
+                let px = v * w + u;
+                if mask.ids[px] != mask.id || frame.depth.metres(px).is_none() {
+                    continue;
+                }
+                cells += 1;
+                covered += (gy.saturating_sub(1)..=(gy + 1).min(g - 1))
+                    .any(|y| (gx.saturating_sub(1)..=(gx + 1).min(g - 1)).any(|x| self.explained[y * g + x]))
+                    as u32;
+            }
+        }
+        if cells == 0 { 0.0 } else { covered as f32 / cells as f32 }
     }
 }
 

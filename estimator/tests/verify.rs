@@ -4,7 +4,11 @@
 //! patch of flat table fail: a bowl standing on it, a box face flush with it,
 //! a can over missing depth. A real object thinner than the border terms'
 //! tolerance, lying flat, still passes; a large object's pose turned well off
-//! it may pass on mask agreement, a small object's never.
+//! it may pass on mask agreement, a small object's never. True poses explain
+//! their own regions and not their neighbours', and a pose made up for part
+//! of another object is dropped as explained by that object's pose. The
+//! shipped segmenter is sure of real objects' classes somewhere in their
+//! regions, and of no class on a patch of bare table.
 
 mod common;
 
@@ -346,4 +350,138 @@ fn a_pose_turned_off_a_large_object_passes_on_mask_agreement() {
         }
     });
     assert!(rescued >= 2, "{rescued} of {tried} rotated poses passed on mask agreement alone");
+}
+
+#[test]
+fn true_poses_explain_their_own_regions_and_not_their_neighbours() {
+    let set = builtin_objects();
+    let mut verifier = Verifier::new(&set, VerifyConfig::default());
+    let (mut own, mut pairs) = (0, 0);
+    for seed in 0..6 {
+        let r = render(&set, 7_000 + seed);
+        let labels = r.target.labels().to_vec();
+        let frame = view(&r, &labels);
+        let mut ws = workspace(&set);
+        let n = ws.prepare(&frame, 1).unwrap();
+        let truth = |i: usize| r.truth.objects.iter().find(|o| o.class_id == ws.instances[i].class_id);
+        for i in 0..n {
+            let Some(ti) = truth(i).filter(|t| t.visible_fraction >= 0.5 && ws.instances[i].pixels >= 400) else {
+                continue;
+            };
+            let pi = pose_of(ti.class_id, i, &ws, &ti.pose);
+            let share = verifier.explained_share(&frame, mask(&ws, i), &pi);
+            assert!(share >= 0.8, "class {} explains {share:.2} of its own region", ti.class_id);
+            own += 1;
+            for j in (0..n).filter(|&j| j != i) {
+                let Some(tj) = truth(j) else { continue };
+                // Neighbours, occluders and occluded objects: the camera sees
+                // one surface per pixel, so another object's model agrees with
+                // the depth at most along the borders they share.
+                let share = verifier.explained_share(&frame, mask(&ws, j), &pi);
+                assert!(share <= 0.3, "class {} explains {share:.2} of class {}'s region", ti.class_id, tj.class_id);
+                pairs += 1;
+            }
+        }
+    }
+    assert!(own >= 12 && pairs >= 40, "too few checked: {own} own regions, {pairs} pairs");
+}
+
+#[test]
+fn a_pose_made_up_for_part_of_another_object_is_dropped() {
+    use fusepose_estimator::PoseSet;
+    use fusepose_estimator::explained::suppress;
+    let set = builtin_objects();
+    let mut verifier = Verifier::new(&set, VerifyConfig::default());
+    let mut checked = 0;
+    for seed in 0..6 {
+        let r = render(&set, 7_000 + seed);
+        let w = r.truth.intrinsics.width as usize;
+        let base = r.target.labels().to_vec();
+        for t in r.truth.objects.iter().filter(|t| t.visible_fraction >= 0.7) {
+            // The object's left half, as a segmenter might label it: another class.
+            let pixels: Vec<usize> = (0..base.len()).filter(|&p| base[p] == t.class_id).collect();
+            if pixels.len() < 3000 {
+                continue;
+            }
+            let mut us: Vec<usize> = pixels.iter().map(|p| p % w).collect();
+            us.sort_unstable();
+            let (cut, ghost) = (us[us.len() / 2], t.class_id % set.len() as u16 + 1);
+            if r.truth.objects.iter().any(|o| o.class_id == ghost) {
+                continue;
+            }
+            let mut labels = base.clone();
+            pixels.iter().filter(|&&p| p % w < cut).for_each(|&p| labels[p] = ghost);
+            let frame = view(&r, &labels);
+            let mut ws = workspace(&set);
+            let n = ws.prepare(&frame, 1).unwrap();
+            let (Some(ti), Some(gi)) = (
+                (0..n).find(|&i| ws.instances[i].class_id == t.class_id),
+                (0..n).find(|&i| ws.instances[i].class_id == ghost),
+            ) else {
+                continue;
+            };
+            // The made-up object stands on the region: at its centre pixel's depth, upright.
+            let b = ws.instances[gi].bbox;
+            let (u, v) = ((b[0] as usize + b[2] as usize) / 2, (b[1] as usize + b[3] as usize) / 2);
+            let z = r.target.depth_m()[v * w + u] as f64;
+            let made_up = Pose::from_parts(
+                back_project(&r, u, v, if z > 0.0 { z } else { t.pose.translation.z }).coords.into(),
+                UnitQuaternion::identity(),
+            );
+            let mut poses = PoseSet::with_capacity(4);
+            poses.push(pose_of(t.class_id, ti, &ws, &t.pose));
+            poses.push(pose_of(ghost, gi, &ws, &made_up));
+            // The made-up pose even fits better: the region decides, not the score.
+            let scores = [0.5, 0.9];
+            let mut dropped = Vec::new();
+            let mask_of = |p: &ObjectPose| Some(mask(&ws, p.instance_id as usize));
+            let removed = suppress(&mut verifier, &frame, mask_of, &mut poses, 0.5, &scores, &mut dropped);
+            assert_eq!(removed, 1, "class {} with a made-up class {ghost} on its left half", t.class_id);
+            assert_eq!(poses.as_slice()[0].class_id, t.class_id);
+            checked += 1;
+        }
+    }
+    assert!(checked >= 5, "too few objects checked: {checked}");
+}
+
+#[test]
+fn the_shipped_segmenter_is_sure_of_real_objects_and_of_no_class_on_bare_table() {
+    use fusepose_estimator::seg::SegEngine;
+    let set = builtin_objects();
+    let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+    let mut seg = SegEngine::load(&weights, &set).expect("the shipped model embeds a segmenter");
+    let min = VerifyConfig::default().min_region_probability;
+    assert!(min > 0.0, "the default judges the segmenter's regions");
+    let (mut objects, mut sure, mut patches) = (0, 0, 0);
+    let mut ws = workspace(&set);
+    for seed in 0..8 {
+        let r = render(&set, 9_100 + seed);
+        let truth_labels = r.target.labels().to_vec();
+        let mut seg_labels = vec![0u16; truth_labels.len()];
+        seg.segment(&view(&r, &truth_labels), &mut seg_labels).unwrap();
+        // The true regions of clearly visible objects: the segmenter is sure of their class somewhere.
+        let n = ws.prepare(&view(&r, &truth_labels), 1).unwrap();
+        for i in 0..n {
+            let inst = ws.instances[i];
+            let Some(t) = r.truth.objects.iter().find(|o| o.class_id == inst.class_id) else { continue };
+            if t.visible_fraction >= 0.5 && inst.pixels >= 400 {
+                let p =
+                    seg.region_probability(ws.component_ids(), ws.component_id(i).unwrap(), inst.class_id, inst.bbox);
+                objects += 1;
+                sure += (p >= min) as usize;
+            }
+        }
+        // A patch of bare table given any class: nowhere sure of it.
+        let Some(corner) = table_patch(&r, 60, 40) else { continue };
+        for class in 1..=set.len() as u16 {
+            let labels = patch_labels(&r, class, corner, 60, 40);
+            assert_eq!(ws.prepare(&view(&r, &labels), 1).unwrap(), 1);
+            let p =
+                seg.region_probability(ws.component_ids(), ws.component_id(0).unwrap(), class, ws.instances[0].bbox);
+            assert!(p < min, "class {class} on bare table: peak probability {p:.3}");
+            patches += 1;
+        }
+    }
+    assert!(objects >= 20 && patches >= 16, "too few checked: {objects} objects, {patches} patches");
+    assert!(sure as f64 >= 0.95 * objects as f64, "sure of {sure} of {objects} real objects");
 }

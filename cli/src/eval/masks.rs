@@ -111,6 +111,11 @@ impl NetMasks {
     }
 
     /// The label plane of the last segmented frame, as the estimator takes it.
+    /// The engine after the last [`NetMasks::segment`] (its logits describe that frame).
+    pub fn engine(&self) -> &SegEngine {
+        &self.engine
+    }
+
     pub fn plane(&self) -> fusepose_estimator::LabelPlane<'_> {
         if self.classes.is_empty() {
             fusepose_estimator::LabelPlane::U16(&self.labels)

@@ -175,6 +175,11 @@ fn erode_boundaries(cells: &[u16], w: usize, out: &mut [u16]) {
     }
 }
 
+/// Most output cells [`SegEngine::region_probability`] judges: a 160x120 grid,
+/// i.e. a 320x240 network input (the shipped segmenter's is 160x120, an 80x60
+/// grid); a file with a larger grid gets NaN (not judged).
+const MAX_CELLS: usize = 160 * 120 + 64;
+
 /// The segmenter inference engine.
 pub struct SegEngine {
     config: SegConfig,
@@ -526,6 +531,56 @@ impl SegEngine {
     /// Instance id → class id table of the last [`SegEngine::segment_instances`] (index 0 = background).
     pub fn instance_classes(&self) -> &[u16] {
         &self.instance_classes
+    }
+
+    /// How sure the last segmentation was of `class` anywhere in one region:
+    /// the highest softmax probability of `class` over the segmenter cells
+    /// under the frame pixels with `ids[p] == id` inside `bbox` ([u_min,
+    /// v_min, u_max, v_max], inclusive). A real object has cells the
+    /// segmenter is sure of, at least inside it; a region it made up (a
+    /// class-coloured patch, part of another object) may have none. NaN
+    /// before the first segmentation, for a class the file does not have, or
+    /// for a region without pixels. `ids` must be the frame's size.
+    pub fn region_probability(&self, ids: &[u32], id: u32, class: u16, bbox: [u16; 4]) -> f32 {
+        let Some(map) = self.map.as_ref() else { return f32::NAN };
+        let (w, h) = map.frame_size();
+        let classes = self.config.num_classes + 1;
+        let (out_w, out_h) = map.grid_size();
+        if ids.len() != w * h || class as usize >= classes || out_w * out_h > MAX_CELLS {
+            return f32::NAN;
+        }
+        let cells = out_w * out_h;
+        let logit = |c: usize, cell: usize| self.logits[c * cells + cell];
+        // Each cell under the region once (a frame row crosses the same cells
+        // as the rows above it): a bit per cell of the box's cell rectangle.
+        let (u1, v1) = ((bbox[2] as usize).min(w - 1), (bbox[3] as usize).min(h - 1));
+        let (u0, v0) = ((bbox[0] as usize).min(u1), (bbox[1] as usize).min(v1));
+        let ((gx0, gy0), (gx1, _)) = (map.cell_of(u0, v0), map.cell_of(u1, v1));
+        let span = gx1 + 1 - gx0;
+        let mut seen = [0u64; MAX_CELLS / 64];
+        let (mut best, mut best_cell) = (f32::NEG_INFINITY, usize::MAX);
+        for v in v0..=v1 {
+            for u in u0..=u1 {
+                if ids[v * w + u] != id {
+                    continue;
+                }
+                let (cx, cy) = map.cell_of(u, v);
+                let bit = (cy - gy0) * span + (cx - gx0);
+                if seen[bit / 64] & (1 << (bit % 64)) != 0 {
+                    continue;
+                }
+                seen[bit / 64] |= 1 << (bit % 64);
+                let cell = cy * out_w + cx;
+                // log softmax(class) = logit(class) − logsumexp(logits).
+                let max = (0..classes).map(|c| logit(c, cell)).fold(f32::NEG_INFINITY, f32::max);
+                let sum: f32 = (0..classes).map(|c| (logit(c, cell) - max).exp()).sum();
+                let log_p = logit(class as usize, cell) - max - sum.ln();
+                if log_p > best {
+                    (best, best_cell) = (log_p, cell);
+                }
+            }
+        }
+        if best_cell == usize::MAX { f32::NAN } else { best.exp() }
     }
 
     /// Runs the network on a prepared input `[4, H0, W0]` and returns the logits `[K+1, H1*W1]`.
