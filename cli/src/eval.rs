@@ -662,6 +662,9 @@ impl Runner {
         let start = Instant::now();
         let ws = &self.workspace;
         let min_region_probability = verifier.config().min_region_probability;
+        let trace = std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some();
+        // The segmenter's certainty is read only when judged or traced.
+        let seg = seg.filter(|_| min_region_probability > 0.0 || trace);
         let verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
             .poses
             .as_slice()
@@ -682,7 +685,7 @@ impl Runner {
             })
             .collect();
         let passed: Vec<bool> = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
-        if std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some() {
+        if trace {
             let pairs = match_estimates(&frame.gt, self.poses.as_slice());
             for (p, v) in self.poses.as_slice().iter().zip(&verdicts) {
                 let add_s = pairs.iter().find(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, p))).and_then(|(gt, _)| {

@@ -277,16 +277,10 @@ impl Verifier {
             return fail;
         }
         let k = &frame.intrinsics;
-        let r = pose.rotation.to_rotation_matrix();
-        let m = r.matrix().map(|v| v as f32);
+        let m = pose.rotation.to_rotation_matrix().matrix().map(|v| v as f32);
         let t = pose.translation.map(|v| v as f32);
         let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
-        let project = |p: &[f32; 3]| -> Option<(f32, f32, f32)> {
-            let x = m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0];
-            let y = m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1];
-            let z = m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2];
-            (z > 1e-3 && z.is_finite()).then(|| (fx * x / z + cx, fy * y / z + cy, z))
-        };
+        let project = projector(frame, pose);
         // Window: the mask's box joined with the model's projected box, inside the image.
         let [mu0, mv0, mu1, mv1] = mask.bbox.map(|v| v as f32);
         let (mut u0, mut v0, mut u1, mut v1) = (mu0, mv0, mu1, mv1);
@@ -377,9 +371,7 @@ impl Verifier {
                     front_cells += 1;
                     behind_cells += (z_obs < z_front - cfg.tolerance_base_m - cfg.tolerance_per_m * z_front) as u32;
                 }
-                let near = (gy.saturating_sub(1)..=(gy + 1).min(g - 1))
-                    .any(|y| (gx.saturating_sub(1)..=(gx + 1).min(g - 1)).any(|x| self.explained[y * g + x]));
-                mask_covered += near as u32;
+                mask_covered += explained_near(&self.explained, g, gx, gy) as u32;
             }
         }
         let judged = inliers + outliers;
@@ -511,35 +503,13 @@ impl Verifier {
                 return 0.0;
             }
         }
-        self.explained_share_of_samples(frame, mask, other, class)
-    }
-
-    fn explained_share_of_samples(
-        &mut self,
-        frame: &FrameView<'_>,
-        mask: MaskRef<'_>,
-        other: &ObjectPose,
-        class: usize,
-    ) -> f32 {
-        let (w, h) = (frame.width(), frame.height());
-        let k = &frame.intrinsics;
-        let m = other.rotation.to_rotation_matrix().matrix().map(|v| v as f32);
-        let t = other.translation.map(|v| v as f32);
-        let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
-        let [u0, v0, u1, v1] = mask.bbox.map(|v| v as f32);
-        let (u1, v1) = (u1.min((w - 1) as f32), v1.min((h - 1) as f32));
         let g = self.config.grid;
         let (cw, ch) = ((u1 - u0 + 1.0) / g as f32, (v1 - v0 + 1.0) / g as f32);
         let cfg = self.config;
+        let project = projector(frame, other);
         self.explained.fill(false);
         for p in &self.samples[class] {
-            let z = m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2];
-            if !(z > 1e-3 && z.is_finite()) {
-                continue;
-            }
-            let x = m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0];
-            let y = m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1];
-            let (u, v) = (fx * x / z + cx, fy * y / z + cy);
+            let Some((u, v, z)) = project(p) else { continue };
             let (gx, gy) = ((u - u0 + 0.5) / cw, (v - v0 + 0.5) / ch);
             if !(gx >= 0.0 && gy >= 0.0 && gx < g as f32 && gy < g as f32) {
                 continue;
@@ -560,13 +530,34 @@ impl Verifier {
                     continue;
                 }
                 cells += 1;
-                covered += (gy.saturating_sub(1)..=(gy + 1).min(g - 1))
-                    .any(|y| (gx.saturating_sub(1)..=(gx + 1).min(g - 1)).any(|x| self.explained[y * g + x]))
-                    as u32;
+                covered += explained_near(&self.explained, g, gx, gy) as u32;
             }
         }
         if cells == 0 { 0.0 } else { covered as f32 / cells as f32 }
     }
+}
+
+/// Camera-frame projection of object-frame points at `pose`: pixel (u, v)
+/// and depth z (metres); None behind or at the camera.
+fn projector(frame: &FrameView<'_>, pose: &ObjectPose) -> impl Fn(&[f32; 3]) -> Option<(f32, f32, f32)> {
+    let k = &frame.intrinsics;
+    let m = pose.rotation.to_rotation_matrix().matrix().map(|v| v as f32);
+    let t = pose.translation.map(|v| v as f32);
+    let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
+    move |p: &[f32; 3]| {
+        let x = m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0];
+        let y = m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1];
+        let z = m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2];
+        (z > 1e-3 && z.is_finite()).then(|| (fx * x / z + cx, fy * y / z + cy, z))
+    }
+}
+
+/// Whether grid cell (gx, gy) of a g×g grid or one of its 8 neighbours is
+/// marked in `explained` (samples are sparser than pixels on near objects,
+/// so a cell of its own may hold none).
+fn explained_near(explained: &[bool], g: usize, gx: usize, gy: usize) -> bool {
+    (gy.saturating_sub(1)..=(gy + 1).min(g - 1))
+        .any(|y| (gx.saturating_sub(1)..=(gx + 1).min(g - 1)).any(|x| explained[y * g + x]))
 }
 
 /// Whether a surface within `tol` of depth `z` (metres) is measured within
