@@ -19,6 +19,7 @@ pub mod interpenetration;
 pub mod net;
 pub mod parts;
 pub mod poses;
+pub mod resident;
 pub mod sampling;
 pub mod seg;
 pub mod split;

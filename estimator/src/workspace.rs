@@ -18,6 +18,7 @@ use rand_pcg::Pcg64Mcg;
 use crate::frame::{FrameError, FrameView, LabelPlane};
 use crate::instances::{Component, InstanceFinder, InstanceLimits, LabelStats};
 use crate::parts::PartJoiner;
+use crate::resident;
 use crate::sampling;
 use crate::split::{CutLimits, RegionSplitter};
 
@@ -151,12 +152,14 @@ impl Workspace {
         Ok(Self {
             config,
             instances: Vec::with_capacity(m),
-            points: Array3::zeros((m, n, 3)),
-            crops: Array4::zeros((m, 3, s, s)),
-            choose: Array2::zeros((m, n)),
+            // Resident now: a frame with more instances than any before
+            // would otherwise fault pages in mid-run (`crate::resident`).
+            points: resident::array((m, n, 3), 0.0),
+            crops: resident::array((m, 3, s, s), 0.0),
+            choose: resident::array((m, n), 0),
             finder: InstanceFinder::with_capacity(0, m),
             candidates: Vec::new(),
-            picked: vec![0; n],
+            picked: resident::vec(0, n),
             joiner: None,
             splitter: None,
             stats: PrepareStats::default(),
@@ -192,7 +195,8 @@ impl Workspace {
             self.stats.split_regions = splitter.split(&mut self.finder, frame, limits);
         }
         if self.candidates.capacity() < w * h {
-            self.candidates.reserve(w * h - self.candidates.len());
+            let additional = w * h - self.candidates.len();
+            resident::reserve(&mut self.candidates, additional);
         }
         let mut rng = Pcg64Mcg::seed_from_u64(frame_seed);
         for k in 0..self.finder.components().len() {

@@ -11,6 +11,7 @@ use ndarray::{Array1, Array2, ArrayView1, ArrayView2, ArrayViewMut2, Axis, s};
 use super::config::NetConfig;
 use super::gemm::{cols_len, conv3x3, dense, gemm_acc};
 use super::weights::{NetLoadError, WeightFile};
+use crate::resident;
 
 /// A dense layer `[in, out]` + bias.
 #[derive(Clone, Debug)]
@@ -150,21 +151,24 @@ impl Scratch {
             .max(cols_len(c3, s4))
             .max(cols_len(c3 + c2, s2));
         let lw = c.local_width();
-        let z = |r: usize, k: usize| Array2::<f32>::zeros((r, k));
+        // Every page resident now: later frames may use rows earlier ones did not
+        // (`crate::resident`).
+        let z = |r: usize, k: usize| resident::array((r, k), 0.0f32);
+        let v = |len: usize| resident::vec(0.0f32, len);
         Self {
             n,
             active: n,
             s,
-            crop: vec![0.0; 3 * s * s],
+            crop: v(3 * s * s),
             points: z(n, 3),
-            choose: vec![0; n],
-            cols: vec![0.0; cols],
-            e1: vec![0.0; c1 * s * s],
-            e2: vec![0.0; c2 * s2],
-            e3: vec![0.0; c3 * s4],
-            e4: vec![0.0; c3 * s4],
-            cat: vec![0.0; (c3 + c2) * s2],
-            d1: vec![0.0; c.emb * s2],
+            choose: resident::vec(0u32, n),
+            cols: v(cols),
+            e1: v(c1 * s * s),
+            e2: v(c2 * s2),
+            e3: v(c3 * s4),
+            e4: v(c3 * s4),
+            cat: v((c3 + c2) * s2),
+            d1: v(c.emb * s2),
             d2in: z(n, c.emb + c1),
             emb: z(n, c.emb),
             gx: z(n, 3),
