@@ -230,6 +230,13 @@ pub struct Args {
     /// mean probability below this fail (0 = off).
     #[arg(long)]
     pub verify_min_region_probability: Option<f32>,
+    /// `--masks net`: as the daemon's `estimator.verify_region_certainty_quantile`,
+    /// the segmenter's recorded certainty of real objects at this quantile
+    /// (0.01..=0.5; 0 = off) as the region-probability floor (the higher of
+    /// the two applies). Default: the daemon's (0.05) where the weight file
+    /// records the certainty, else off.
+    #[arg(long, value_name = "Q")]
+    pub verify_region_quantile: Option<f32>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -250,6 +257,14 @@ pub struct Args {
     /// a list (`none,warm,cool,dim`) evaluates each and prints a row per cast.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "none")]
     pub cast: Vec<cast::Cast>,
+    /// Colour constancy before the networks (`estimator::white_balance`),
+    /// after any cast: off, gray (gray world) or gray-ev (and exposure to
+    /// `--white-balance-target`).
+    #[arg(long, default_value = "off")]
+    pub white_balance: fusepose_estimator::white_balance::Mode,
+    /// Mean linear brightness `gray-ev` brings a frame to.
+    #[arg(long, default_value_t = 0.2)]
+    pub white_balance_target: f32,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -321,6 +336,9 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
         .context("preparing ADD/ADD-S points")?;
 
     let frames = args.limit.map_or(data.len(), |l| l.min(data.len()));
+    let mut white_balance =
+        fusepose_estimator::white_balance::WhiteBalance::new(args.white_balance, args.white_balance_target);
+    let mut brightness = Vec::with_capacity(frames);
     let bar = ProgressBar::new(frames as u64);
     bar.set_style(
         ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} frames {elapsed_precise} eta {eta}")
@@ -332,6 +350,8 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
         let mut frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
         let colour_cast = args.cast.first().copied().unwrap_or(cast::Cast::None);
         colour_cast.apply(&mut frame.rgb, args.seed.wrapping_add(index as u64));
+        brightness.push(white_balance.brightness(&frame.rgb) as f64);
+        white_balance.balance(&mut frame.rgb);
         if let Some(seg) = &mut net_masks {
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
         }
@@ -364,6 +384,11 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     if let Some(dir) = &args.overlay {
         println!("wrote {frames} overlays to {}", dir.display());
     }
+    println!(
+        "frames' mean linear brightness (after any cast, before white balance {:?}): {:.4}",
+        args.white_balance,
+        brightness.iter().sum::<f64>() / brightness.len().max(1) as f64
+    );
 
     let name = args.dataset.display().to_string();
     let mut summaries = serde_json::Map::new();
@@ -460,6 +485,36 @@ struct Runner {
     per_object: Option<PerObjectWriter<std::io::BufWriter<std::fs::File>>>,
 }
 
+/// `--verify-region-quantile`: the segmenter's recorded certainty of real
+/// objects at that quantile (without the flag: at the daemon's default
+/// quantile, 0 when the file records none); an error when the flag is given
+/// and the file records none or the quantile is out of range.
+fn region_floor(args: &Args) -> anyhow::Result<f32> {
+    if args.verify_region_quantile == Some(0.0) || args.verify == "off" {
+        return Ok(0.0);
+    }
+    let weights = match &args.seg_weights {
+        Some(path) => path.clone(),
+        None => crate::weights::resolve_weights(args.weights.as_deref())?,
+    };
+    let file = fusepose_estimator::seg::SegFile::read(&weights)
+        .with_context(|| format!("--verify-region-quantile: reading the segmenter in {}", weights.display()))?;
+    let Some(q) = args.verify_region_quantile else {
+        // The daemon's default: on where the file records the certainty.
+        let q = fusepose_estimator::seg::file::DEFAULT_CERTAINTY_QUANTILE;
+        return Ok(file.certainty.and_then(|c| c.quantile(q)).unwrap_or(0.0));
+    };
+    let certainty = file.certainty.with_context(|| {
+        format!(
+            "--verify-region-quantile: {} records no segmenter certainty; record it with \
+             `fusepose train --stage calibrate --objects ... --out {}`",
+            weights.display(),
+            weights.display()
+        )
+    })?;
+    certainty.quantile(q).with_context(|| format!("--verify-region-quantile {q}: must be in 0.01..=0.5"))
+}
+
 impl Runner {
     fn new(
         kind: EstimatorKind,
@@ -473,6 +528,8 @@ impl Runner {
         let name =
             if several_masks { format!("{}/{}-masks", kind.name(), masks.name()) } else { kind.name().to_string() };
         let num_classes = u16::try_from(objects.len()).context("more than 65535 objects")?;
+        // Only the segmenter's own regions are judged on its certainty.
+        let region_floor = if masks == MaskSource::Net { region_floor(args)? } else { 0.0 };
         let (estimator, config): (Box<dyn Estimator>, WorkspaceConfig) = match kind {
             EstimatorKind::Icp => (
                 Box::new(IcpEstimator::new(objects, IcpConfig::default())?),
@@ -527,6 +584,7 @@ impl Runner {
             instance_counts: instances::InstanceCounts::default(),
             verifier: (args.verify != "off").then(|| {
                 let d = VerifyConfig::default();
+                let min_region = args.verify_min_region_probability.unwrap_or(d.min_region_probability);
                 Verifier::new(
                     objects,
                     VerifyConfig {
@@ -545,7 +603,7 @@ impl Runner {
                             .verify_agreeing_min_inliers
                             .unwrap_or(d.agreeing_min_inlier_fraction),
                         agreeing_min_fit: args.verify_agreeing_min_fit.unwrap_or(d.agreeing_min_fit),
-                        min_region_probability: args.verify_min_region_probability.unwrap_or(d.min_region_probability),
+                        min_region_probability: min_region.max(region_floor),
                         ..d
                     },
                 )
@@ -829,13 +887,14 @@ impl Runner {
         if self.instance_counts.truth > 0 {
             println!("{}", self.instance_counts.summary());
         }
-        if self.verifier.is_some() {
+        if let Some(v) = &self.verifier {
             let [ghosts, real, good, all] = self.verify_counts;
             println!(
-                "verification ({}): {all} poses checked, {} failed: {ghosts} ghosts, {real} of real objects ({good} of them under 2 cm ADD-S); {:.3} ms per object (median)",
+                "verification ({}): {all} poses checked, {} failed: {ghosts} ghosts, {real} of real objects ({good} of them under 2 cm ADD-S); {:.3} ms per object (median); segmenter certainty floor {:.3}",
                 if self.verify_drop { "failures dropped" } else { "flag only" },
                 ghosts + real,
-                percentile(&self.verify_ms, 0.5)
+                percentile(&self.verify_ms, 0.5),
+                v.config().min_region_probability
             );
         }
         if !self.refused.is_empty() {

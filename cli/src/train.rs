@@ -28,6 +28,12 @@ pub enum StageArg {
     Both,
     /// The built-in instance segmenter (its own weights; see `--out`).
     Seg,
+    /// Measures how sure the segmenter in `--out` is of real objects on
+    /// rendered frames drawn like its training data (`--randomize`,
+    /// `--depth-sensor`, `--intrinsics`; 400 of them) and stores
+    /// it in that file, for `estimator.verify_region_certainty_quantile`.
+    /// `--stage all` does this itself.
+    Calibrate,
     /// Everything for a new object set within `--minutes`: pose net + refiner,
     /// segmenter, fine-tune on the segmenter's masks, acceptance report.
     All,
@@ -263,6 +269,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         StageArg::Refine => Stage::Refine,
         StageArg::Both => Stage::Both,
         StageArg::Seg => return seg::run(set, &args),
+        StageArg::Calibrate => {
+            return seg::calibrate_file(&set, &args, &args.out, seg::CALIBRATION_FRAMES).map(|_| ());
+        }
         StageArg::All => return pipeline::run(&args),
     };
     if args.bench_engine {

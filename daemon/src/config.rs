@@ -33,6 +33,11 @@ pub enum MaskSource {
     Net,
 }
 
+/// Default of `estimator.verify_region_certainty_quantile`: chosen on
+/// tuning splits for the shipped segmenter and a 14-minute one
+/// (docs/BENCHMARKS.md, "Session 20").
+pub const DEFAULT_REGION_CERTAINTY_QUANTILE: f32 = fusepose_estimator::seg::file::DEFAULT_CERTAINTY_QUANTILE;
+
 /// Most cameras one daemon serves.
 pub const MAX_CAMERAS: usize = 16;
 
@@ -212,6 +217,14 @@ pub struct EstimatorConfig {
     /// gave its class with at least this probability fails (the segmenter
     /// made the region up; `VerifyConfig::min_region_probability`). 0 = off.
     pub verify_min_region_probability: f32,
+    /// With the built-in segmenter: the same test with a floor set per model,
+    /// the segmenter's certainty of real objects at this quantile as its
+    /// weight file records it (`fusepose train --stage calibrate`; e.g. 0.05
+    /// fails a region the segmenter is less sure of than it is of 95 % of
+    /// real objects). 0 = off; the higher of this and
+    /// `verify_min_region_probability` applies. A file without the record
+    /// leaves it off, with a warning.
+    pub verify_region_certainty_quantile: f32,
     /// Regions of one class whose points fit inside one object (within this
     /// factor × its diameter) are joined into one instance: an occluder that
     /// splits an object no longer makes two poses. 0 keeps every region.
@@ -348,6 +361,7 @@ impl Default for EstimatorConfig {
             verify_min_thin_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().min_thin_mask_agreement,
             verify_agreeing_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().agreeing_mask_agreement,
             verify_min_region_probability: fusepose_estimator::verify::VerifyConfig::default().min_region_probability,
+            verify_region_certainty_quantile: DEFAULT_REGION_CERTAINTY_QUANTILE,
             join_parts: 1.0,
             split_regions: 1.0,
             duplicates: 0.0,
@@ -602,6 +616,14 @@ impl DaemonConfig {
                 return Err(invalid(key, v, "must be in 0..=1"));
             }
         }
+        let q = e.verify_region_certainty_quantile;
+        if !(q == 0.0 || (0.01..=0.5).contains(&q)) {
+            return Err(invalid(
+                "estimator.verify_region_certainty_quantile",
+                q,
+                "must be 0 (off) or in 0.01..=0.5 (a quantile of the segmenter's certainty of real objects)",
+            ));
+        }
         if !(e.verify_agreeing_mask_agreement.is_finite() && e.verify_agreeing_mask_agreement >= 0.0) {
             return Err(invalid(
                 "estimator.verify_agreeing_mask_agreement",
@@ -705,6 +727,23 @@ mod tests {
             err.starts_with("estimator.verify_agreeing_mask_agreement") && err.contains("above 1 turns it off"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn the_region_certainty_quantile_is_checked() {
+        let default = DaemonConfig::default().estimator.verify_region_certainty_quantile;
+        assert_eq!(default, fusepose_estimator::seg::file::DEFAULT_CERTAINTY_QUANTILE);
+        let off = DaemonConfig::parse("[estimator]\nverify_region_certainty_quantile = 0\n").unwrap();
+        assert_eq!(off.estimator.verify_region_certainty_quantile, 0.0);
+        for bad in ["0.005", "0.6", "-0.1"] {
+            let err = DaemonConfig::parse(&format!("[estimator]\nverify_region_certainty_quantile = {bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.starts_with("estimator.verify_region_certainty_quantile") && err.contains("0.01..=0.5"),
+                "{err}"
+            );
+        }
     }
 
     #[test]

@@ -130,6 +130,35 @@ fn segmenter(config: &EstimatorConfig, objects: &ObjectSet) -> anyhow::Result<Op
     }
 }
 
+/// The region-probability floor `estimator.verify_region_certainty_quantile`
+/// asks of this segmenter: its recorded certainty of real objects at that
+/// quantile; 0 when off or when the file has no record (warned).
+fn calibrated_floor(config: &EstimatorConfig, seg: &SegFile) -> f32 {
+    let q = config.verify_region_certainty_quantile;
+    if q <= 0.0 {
+        return 0.0;
+    }
+    match seg.certainty.as_ref().and_then(|c| c.quantile(q)) {
+        Some(p) => {
+            tracing::info!(
+                quantile = %q,
+                min_region_probability = %p,
+                "segmenter certainty term: the segmenter's calibrated certainty of real objects at this quantile"
+            );
+            p
+        }
+        None => {
+            tracing::warn!(
+                weights = %config.weights.display(),
+                "estimator.verify_region_certainty_quantile = {q}, but the weight file records no segmenter certainty: \
+                 the term stays off (record it with `fusepose train --stage calibrate --objects ... --out {}`)",
+                config.weights.display()
+            );
+            0.0
+        }
+    }
+}
+
 /// Resolves `[estimator]`: loads objects, applies the net → ICP fallback, loads the segmenter.
 pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     let mut spec = resolve_estimator(config)?;
@@ -158,6 +187,9 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
         }
         spec.segmenter = segmenter(config, &objects)?;
+        if let (Some((_, cfg, _)), Some(seg)) = (spec.verify.as_mut(), spec.segmenter.as_deref()) {
+            cfg.min_region_probability = cfg.min_region_probability.max(calibrated_floor(config, seg));
+        }
         // Checked by the config's validation; a bad value there is an error, not this default.
         spec.seg_boundary =
             config.seg_boundary.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_boundary: {e}"))?;
@@ -765,5 +797,35 @@ impl PoseEngine {
     /// (false when `estimator.masks = "net"` segments every frame).
     pub fn uses_frame_labels(&self) -> bool {
         !(self.segmenter.is_some() && self.masks == MaskSource::Net)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn shipped_config() -> EstimatorConfig {
+        let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+        EstimatorConfig { weights, ..EstimatorConfig::default() }
+    }
+
+    #[test]
+    fn the_certainty_floor_is_the_files_quantile_and_off_without_a_record() {
+        let config = shipped_config();
+        let mut file = SegFile::read(&config.weights).unwrap();
+        let q = config.verify_region_certainty_quantile;
+        let expected = file.certainty.as_ref().expect("the shipped file records it").quantile(q).unwrap();
+        assert!(expected > 0.0);
+        assert_eq!(calibrated_floor(&config, &file), expected);
+        // The daemon's verifier gets it: the higher of the floor and the plain minimum.
+        let spec = resolve(&config).unwrap();
+        assert_eq!(spec.verify.as_ref().unwrap().1.min_region_probability, expected);
+        let plain = EstimatorConfig { verify_min_region_probability: 0.99, ..shipped_config() };
+        assert_eq!(resolve(&plain).unwrap().verify.unwrap().1.min_region_probability, 0.99);
+        let off = EstimatorConfig { verify_region_certainty_quantile: 0.0, ..shipped_config() };
+        assert_eq!(calibrated_floor(&off, &file), 0.0);
+        assert_eq!(resolve(&off).unwrap().verify.unwrap().1.min_region_probability, 0.0);
+        file.certainty = None;
+        assert_eq!(calibrated_floor(&config, &file), 0.0, "a file without a record leaves the term off");
     }
 }

@@ -106,6 +106,11 @@ fn one_command_trains_a_new_object_set_and_the_daemon_serves_it() -> anyhow::Res
     for stage in ["stage 1/4", "stage 2/4", "stage 3/4", "stage 4/4"] {
         assert!(stdout.contains(stage), "{stage} missing from:\n{stdout}");
     }
+    // The segmenter's certainty of real objects is measured and travels into the
+    // final file (stage 3 re-embeds the segmenter), for the verifier's floor.
+    assert!(stdout.contains("segmenter certainty of real objects"), "no calibration:\n{stdout}");
+    let certainty = fusepose_estimator::seg::SegFile::read(&out)?.certainty.expect("a certainty record");
+    assert!(certainty.regions > 0 && certainty.quantile(0.05).is_some_and(|p| (0.0..=1.0).contains(&p)));
 
     // The report: both mask sources scored on the held-out split, and the config lines.
     let report = std::fs::read_to_string(out.with_extension("report.md"))?;

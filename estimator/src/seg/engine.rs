@@ -14,7 +14,7 @@ use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2};
 
 use super::boundary::{Boundary, BoundaryScratch, refine};
 use super::config::{INPUT_CHANNELS, SegConfig};
-use super::file::SegFile;
+use super::file::{Certainty, SegFile};
 use super::input::FrameMap;
 use super::merge::InstanceMerger;
 use super::voting::{Voting, VotingMode, VotingParams};
@@ -231,6 +231,8 @@ pub struct SegEngine {
     /// Nearest maps (rows, columns) for the upsampling into cat3, cat2, cat1.
     up: [(Vec<usize>, Vec<usize>); 3],
     map: Option<FrameMap>,
+    /// How sure this segmenter is of real objects, when its file says.
+    certainty: Option<Certainty>,
 }
 
 impl SegEngine {
@@ -298,6 +300,7 @@ impl SegEngine {
             stack: Vec::with_capacity(hw(1)),
             members: Vec::with_capacity(hw(1)),
             up,
+            certainty: file.certainty.clone(),
             map: None,
             objects: file.objects.clone(),
             layers,
@@ -531,6 +534,12 @@ impl SegEngine {
     /// Instance id → class id table of the last [`SegEngine::segment_instances`] (index 0 = background).
     pub fn instance_classes(&self) -> &[u16] {
         &self.instance_classes
+    }
+
+    /// How sure this segmenter is of real objects (its file's calibration),
+    /// for a threshold of [`SegEngine::region_probability`].
+    pub fn certainty(&self) -> Option<&Certainty> {
+        self.certainty.as_ref()
     }
 
     /// How sure the last segmentation was of `class` anywhere in one region:

@@ -29,6 +29,15 @@ pub const KEY_HYPER: &str = "fusepose.seg.hyper";
 /// (the file's own `fusepose.objects` / `fusepose.train` describe the pose network).
 pub const KEY_EMBEDDED_OBJECTS: &str = "fusepose.seg.objects";
 pub const KEY_EMBEDDED_TRAIN: &str = "fusepose.seg.train";
+/// Metadata key of the segmenter's measured [`Certainty`] of real objects
+/// (same key in both layouts; absent in files calibrated by no one).
+pub const KEY_CERTAINTY: &str = "fusepose.seg.certainty";
+/// The quantile of a segmenter's [`Certainty`] below which the daemon and
+/// `fusepose eval` fail a pose on its region by default (docs/BENCHMARKS.md,
+/// "Session 20": 5 % cut ghosts by a fifth on the tuning splits of the
+/// shipped segmenter and cost nothing on those of a 14-minute one; 10 %
+/// cost 2.7 ADD(S) on path-traced images).
+pub const DEFAULT_CERTAINTY_QUANTILE: f32 = 0.05;
 /// Tensor name prefix of an embedded segmenter.
 pub const EMBEDDED_PREFIX: &str = "seg.";
 
@@ -43,9 +52,78 @@ pub struct SegFile {
     pub config: SegConfig,
     pub objects: Vec<ObjectEntry>,
     pub train: Option<TrainRecord>,
+    /// How sure the segmenter is of real objects, when measured.
+    pub certainty: Option<Certainty>,
     /// All metadata as stored.
     pub metadata: HashMap<String, String>,
     tensors: HashMap<String, Vec<f32>>,
+}
+
+/// How sure a segmenter is of real objects: percentiles 1..=50 of its peak
+/// probability of an object's class over the object's true region
+/// (`SegEngine::region_probability`), measured on rendered frames after
+/// training (`fusepose train --stage calibrate`). The verifier's certainty
+/// term takes its threshold from a low percentile, so that each model is
+/// judged against how sure it is of real objects.
+#[derive(Clone, Debug, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct Certainty {
+    /// `percentiles[i]`: the (i + 1) % percentile of the peaks, ascending.
+    pub percentiles: Vec<f32>,
+    /// Object regions measured.
+    pub regions: usize,
+    /// Frames they came from.
+    pub frames: usize,
+    /// What the frames were (seeds, sampler, camera).
+    pub data: String,
+}
+
+impl Certainty {
+    /// Percentiles 1..=50 of `peaks` (sorted in place; non-empty, finite).
+    pub fn from_peaks(peaks: &mut [f32], frames: usize, data: &str) -> Self {
+        peaks.sort_by(f32::total_cmp);
+        let n = peaks.len();
+        let percentiles = (1..=50).map(|p| peaks[((p * n) / 100).min(n - 1)]).collect();
+        Self { percentiles, regions: n, frames, data: data.to_owned() }
+    }
+
+    /// The `q` quantile (0.01..=0.5, rounded down to a whole percent) of
+    /// the peaks; None outside that range.
+    pub fn quantile(&self, q: f32) -> Option<f32> {
+        let p = (q * 100.0 + 1e-3).floor() as usize;
+        (1..=self.percentiles.len()).contains(&p).then(|| self.percentiles[p - 1])
+    }
+
+    fn check(&self) -> Result<(), String> {
+        if self.percentiles.len() != 50 {
+            return Err(format!("{} percentiles, expected 50", self.percentiles.len()));
+        }
+        if self.percentiles.iter().any(|p| !(0.0..=1.0).contains(p)) || !self.percentiles.is_sorted() {
+            return Err("percentiles must be probabilities in ascending order".into());
+        }
+        Ok(())
+    }
+}
+
+/// `bytes` (a safetensors file) with metadata `key` set to `value`, tensors unchanged.
+pub fn with_metadata(bytes: &[u8], key: &str, value: String) -> Result<Vec<u8>, NetLoadError> {
+    let (_, header) = SafeTensors::read_metadata(bytes).map_err(|e| NetLoadError::Format(e.to_string()))?;
+    let mut metadata = header.metadata().clone().unwrap_or_default();
+    metadata.insert(key.to_owned(), value);
+    let st = SafeTensors::deserialize(bytes).map_err(|e| NetLoadError::Format(e.to_string()))?;
+    safetensors::serialize(st.tensors(), Some(metadata)).map_err(|e| NetLoadError::Format(e.to_string()))
+}
+
+/// Writes `certainty` into the weight file at `path` (either layout), in
+/// place through a temporary file; the file is read back and checked first.
+pub fn store_certainty(path: &Path, certainty: &Certainty) -> Result<(), NetLoadError> {
+    let io = |source| NetLoadError::Io { path: path.to_path_buf(), source };
+    let bytes = std::fs::read(path).map_err(io)?;
+    SegFile::from_bytes(&bytes)?;
+    let json = serde_json::to_string(certainty).map_err(|e| NetLoadError::Format(e.to_string()))?;
+    let out = with_metadata(&bytes, KEY_CERTAINTY, json)?;
+    let partial = path.with_extension("safetensors.part");
+    std::fs::write(&partial, out).map_err(io)?;
+    std::fs::rename(&partial, path).map_err(io)
 }
 
 fn bad(key: &'static str, message: impl ToString) -> NetLoadError {
@@ -84,6 +162,14 @@ impl SegFile {
             return Err(bad(key_objects, format!("{} objects for {} classes", objects.len(), config.num_classes)));
         }
         let train = metadata.get(key_train).and_then(|s| serde_json::from_str(s).ok());
+        let certainty = match metadata.get(KEY_CERTAINTY) {
+            Some(s) => {
+                let c: Certainty = serde_json::from_str(s).map_err(|e| bad(KEY_CERTAINTY, e))?;
+                c.check().map_err(|m| bad(KEY_CERTAINTY, m))?;
+                Some(c)
+            }
+            None => None,
+        };
         let mut tensors = HashMap::new();
         for (name, shape) in config.tensor_shapes() {
             let view = st
@@ -102,7 +188,7 @@ impl SegFile {
             }
             tensors.insert(name, data);
         }
-        Ok(Self { config, objects, train, metadata, tensors })
+        Ok(Self { config, objects, train, certainty, metadata, tensors })
     }
 
     /// Checks that the file was trained for exactly this object set (names,
@@ -193,6 +279,9 @@ pub fn embed(pose: &[u8], seg: &SegFile) -> Result<Vec<u8>, NetLoadError> {
     }
     if let Some(h) = seg.metadata.get(KEY_HYPER) {
         metadata.insert(KEY_HYPER.into(), h.clone());
+    }
+    if let Some(c) = seg.metadata.get(KEY_CERTAINTY) {
+        metadata.insert(KEY_CERTAINTY.into(), c.clone());
     }
     safetensors::serialize(tensors, Some(metadata)).map_err(|e| NetLoadError::Format(e.to_string()))
 }

@@ -2,8 +2,10 @@
 //! [`model`] (the encoder–decoder in burn), [`loss`] (class-weighted
 //! cross-entropy), [`data`] (frames rendered on the fly, augmentation),
 //! [`store`] (weight files and checkpoints), [`validate`] (held-out mIoU and
-//! per-class IoU through the engine), [`trainer`] (the loop).
+//! per-class IoU through the engine), [`certainty`] (how sure it is of real
+//! objects, stored for the verifier), [`trainer`] (the loop).
 
+pub mod certainty;
 pub mod data;
 pub mod loss;
 pub mod model;
