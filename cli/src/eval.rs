@@ -257,14 +257,6 @@ pub struct Args {
     /// a list (`none,warm,cool,dim`) evaluates each and prints a row per cast.
     #[arg(long, value_enum, value_delimiter = ',', default_value = "none")]
     pub cast: Vec<cast::Cast>,
-    /// Colour constancy before the networks (`estimator::white_balance`),
-    /// after any cast: off, gray (gray world) or gray-ev (and exposure to
-    /// `--white-balance-target`).
-    #[arg(long, default_value = "off")]
-    pub white_balance: fusepose_estimator::white_balance::Mode,
-    /// Mean linear brightness `gray-ev` brings a frame to.
-    #[arg(long, default_value_t = 0.2)]
-    pub white_balance_target: f32,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -336,9 +328,6 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
         .context("preparing ADD/ADD-S points")?;
 
     let frames = args.limit.map_or(data.len(), |l| l.min(data.len()));
-    let mut white_balance =
-        fusepose_estimator::white_balance::WhiteBalance::new(args.white_balance, args.white_balance_target);
-    let mut brightness = Vec::with_capacity(frames);
     let bar = ProgressBar::new(frames as u64);
     bar.set_style(
         ProgressStyle::with_template("{prefix} [{bar:40}] {pos}/{len} frames {elapsed_precise} eta {eta}")
@@ -350,8 +339,6 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
         let mut frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
         let colour_cast = args.cast.first().copied().unwrap_or(cast::Cast::None);
         colour_cast.apply(&mut frame.rgb, args.seed.wrapping_add(index as u64));
-        brightness.push(white_balance.brightness(&frame.rgb) as f64);
-        white_balance.balance(&mut frame.rgb);
         if let Some(seg) = &mut net_masks {
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
         }
@@ -384,11 +371,6 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     if let Some(dir) = &args.overlay {
         println!("wrote {frames} overlays to {}", dir.display());
     }
-    println!(
-        "frames' mean linear brightness (after any cast, before white balance {:?}): {:.4}",
-        args.white_balance,
-        brightness.iter().sum::<f64>() / brightness.len().max(1) as f64
-    );
 
     let name = args.dataset.display().to_string();
     let mut summaries = serde_json::Map::new();

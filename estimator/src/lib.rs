@@ -25,7 +25,6 @@ pub mod seg;
 pub mod split;
 pub mod tracking;
 pub mod verify;
-pub mod white_balance;
 pub mod workspace;
 
 pub use frame::{ColorFormat, DepthCensus, DepthPlane, FrameError, FrameView, LabelPlane};

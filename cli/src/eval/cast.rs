@@ -10,8 +10,6 @@
 
 use std::path::PathBuf;
 
-use fusepose_estimator::white_balance::{srgb_decode, srgb_encode};
-
 use super::Args;
 
 /// A colour cast applied to each frame before estimation.
@@ -79,6 +77,19 @@ impl Cast {
             };
         }
     }
+}
+
+/// sRGB code value → linear light in 0..=1 (IEC 61966-2-1).
+fn srgb_decode(v: u8) -> f64 {
+    let c = v as f64 / 255.0;
+    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
+}
+
+/// Linear light → sRGB code value (clipped, rounded).
+fn srgb_encode(l: f64) -> u8 {
+    let l = l.clamp(0.0, 1.0);
+    let c = if l <= 0.003_130_8 { 12.92 * l } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
+    (c * 255.0).round() as u8
 }
 
 /// A small seeded generator (splitmix64) with Box–Muller normals: the noise
