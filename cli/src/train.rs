@@ -144,6 +144,14 @@ pub struct Args {
     /// objects are not given up for a cleaner background; 1 = off).
     #[arg(long, default_value_t = 1.0)]
     pub seg_small_boost: f32,
+    /// `--stage seg`: share of training frames given a random camera cast in
+    /// linear light (white balance, tint, exposure, noise; 0 = none).
+    #[arg(long, default_value_t = 0.0, value_parser = crate::render::probability)]
+    pub seg_cast: f64,
+    /// `--stage seg`: train the centre-offset head (`false` keeps a resumed
+    /// file without one as it is, e.g. to fine-tune the shipped segmenter).
+    #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
+    pub seg_offsets: bool,
     /// Domain randomisation of the rendered training scenes: off | default | strong
     /// (lights, shadows, materials, camera pipeline, tables, distractors, viewpoints).
     #[arg(long, default_value = "default")]

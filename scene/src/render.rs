@@ -34,6 +34,7 @@ mod raster;
 pub mod sensor;
 mod shading;
 mod shadow;
+pub mod srgb;
 mod target;
 
 pub use camera_pipeline::{Blur, CameraEffects, apply_camera_effects};

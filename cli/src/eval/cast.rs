@@ -10,6 +10,8 @@
 
 use std::path::PathBuf;
 
+use fusepose_scene::render::srgb;
+
 use super::Args;
 
 /// A colour cast applied to each frame before estimation.
@@ -59,7 +61,8 @@ impl Cast {
             return;
         }
         // One 256-entry table per channel: decode, scale, encode.
-        let luts: [[u8; 256]; 3] = self.gains().map(|g| std::array::from_fn(|v| srgb_encode(srgb_decode(v as u8) * g)));
+        let luts: [[u8; 256]; 3] =
+            self.gains().map(|g| std::array::from_fn(|v| srgb::encode(srgb::decode(v as u8) * g)));
         let sigma = self.noise_levels();
         let mut rng = SplitMix64(seed ^ 0x6361_7374_u64.wrapping_mul(0x9E37_79B9_7F4A_7C15));
         let mut spare: Option<f64> = None;
@@ -77,19 +80,6 @@ impl Cast {
             };
         }
     }
-}
-
-/// sRGB code value → linear light in 0..=1 (IEC 61966-2-1).
-fn srgb_decode(v: u8) -> f64 {
-    let c = v as f64 / 255.0;
-    if c <= 0.04045 { c / 12.92 } else { ((c + 0.055) / 1.055).powf(2.4) }
-}
-
-/// Linear light → sRGB code value (clipped, rounded).
-fn srgb_encode(l: f64) -> u8 {
-    let l = l.clamp(0.0, 1.0);
-    let c = if l <= 0.003_130_8 { 12.92 * l } else { 1.055 * l.powf(1.0 / 2.4) - 0.055 };
-    (c * 255.0).round() as u8
 }
 
 /// A small seeded generator (splitmix64) with Box–Muller normals: the noise
@@ -210,7 +200,7 @@ mod tests {
         let n = 3 * 20_000;
         let mut rgb = vec![200u8; n];
         Cast::Dim.apply(&mut rgb, 42);
-        let expected = srgb_encode(srgb_decode(200) * 2f64.powf(-1.2)) as f64;
+        let expected = srgb::encode(srgb::decode(200) * 2f64.powf(-1.2)) as f64;
         assert_eq!(expected, 137.0, "200 at −1.2 EV");
         let mean = rgb.iter().map(|&v| v as f64).sum::<f64>() / n as f64;
         let var = rgb.iter().map(|&v| (v as f64 - mean).powi(2)).sum::<f64>() / n as f64;

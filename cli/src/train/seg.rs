@@ -135,6 +135,8 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         progress: !args.quiet,
         sampler: super::training_sampler(args),
         small_region_boost: args.seg_small_boost,
+        cast_augment: args.seg_cast,
+        offsets: args.seg_offsets,
         ..SegTrainConfig::default()
     };
     let report = train_segmenter(cfg)?;

@@ -77,6 +77,8 @@ pub struct SegTrainConfig {
     pub small_region_boost: f32,
     /// How training scenes are drawn (validation uses the plain default scenes).
     pub sampler: fusepose_scene::sampler::SamplerConfig,
+    /// Share of training frames given a camera cast ([`super::data::camera_cast`]); 0 = none.
+    pub cast_augment: f64,
 }
 
 impl Default for SegTrainConfig {
@@ -104,6 +106,7 @@ impl Default for SegTrainConfig {
             offset_weight: 1.0,
             small_region_boost: 1.0,
             sampler: fusepose_scene::sampler::SamplerConfig::training(),
+            cast_augment: 0.0,
         }
     }
 }
@@ -150,6 +153,7 @@ fn hyper_json(cfg: &SegTrainConfig, weights: &[f32]) -> serde_json::Value {
         "class_weight_max_ratio": cfg.class_weight_max_ratio,
         "class_weights": weights,
         "augment": "colour gain 0.8-1.2, bias +-0.15, brightness +-0.3; horizontal flip 0.5",
+        "camera_cast": cfg.cast_augment,
         "offsets": cfg.offsets,
         "offset_weight": cfg.offset_weight,
         "small_region_boost": cfg.small_region_boost,
@@ -289,7 +293,8 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
 
     // Training scenes: far from the pose trainer's and the validation seeds; a resume continues.
     let first_seed = 0x5e90_0000_0000 + (cfg.seed % 1000) * 1_000_000_000 + record.samples + 1;
-    let mut stream = SegStream::spawn(set.clone(), arch.clone(), cfg.sampler.clone(), first_seed, 4 * cfg.batch)?;
+    let mut stream =
+        SegStream::spawn(set.clone(), arch.clone(), cfg.sampler.clone(), cfg.cast_augment, first_seed, 4 * cfg.batch)?;
 
     // Class weights from the first frames (those frames are trained on too).
     let mut pending: Vec<SegSample> = Vec::new();
