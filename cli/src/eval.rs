@@ -226,8 +226,8 @@ pub struct Args {
     pub verify_agreeing_min_inliers: Option<f32>,
     #[arg(long)]
     pub verify_agreeing_min_fit: Option<f32>,
-    /// `--masks net`: poses whose region the segmenter gave their class with a
-    /// mean probability below this fail (0 = off).
+    /// `--masks net`: poses whose region the segmenter nowhere gave their
+    /// class a probability of at least this fail (0 = off).
     #[arg(long)]
     pub verify_min_region_probability: Option<f32>,
     /// `--masks net`: as the daemon's `estimator.verify_region_certainty_quantile`,
@@ -294,10 +294,12 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     mask_sources.dedup();
     let solids = std::sync::Arc::new(fusepose_estimator::interpenetration::Solids::new(&objects));
     let cut_limits = fusepose_estimator::split::CutLimits::new(&objects, args.split_regions);
+    // Read from the weight file once, for every runner on segmenter masks.
+    let floor = if mask_sources.contains(&MaskSource::Net) { region_floor(&args)? } else { 0.0 };
     let mut runners = kinds
         .iter()
         .flat_map(|&k| mask_sources.iter().map(move |&m| (k, m)))
-        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &solids, &cut_limits, &args))
+        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &solids, &cut_limits, floor, &args))
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut net_masks = match mask_sources.contains(&MaskSource::Net) {
         false => None,
@@ -498,6 +500,8 @@ fn region_floor(args: &Args) -> anyhow::Result<f32> {
 }
 
 impl Runner {
+    /// `region_floor`: [`region_floor`]'s value, applied when `masks` is the segmenter's.
+    #[allow(clippy::too_many_arguments)] // the run's shared parts, borrowed one by one
     fn new(
         kind: EstimatorKind,
         masks: MaskSource,
@@ -505,13 +509,14 @@ impl Runner {
         objects: &ObjectSet,
         solids: &std::sync::Arc<fusepose_estimator::interpenetration::Solids>,
         cut_limits: &fusepose_estimator::split::CutLimits,
+        region_floor: f32,
         args: &Args,
     ) -> anyhow::Result<Self> {
         let name =
             if several_masks { format!("{}/{}-masks", kind.name(), masks.name()) } else { kind.name().to_string() };
         let num_classes = u16::try_from(objects.len()).context("more than 65535 objects")?;
         // Only the segmenter's own regions are judged on its certainty.
-        let region_floor = if masks == MaskSource::Net { region_floor(args)? } else { 0.0 };
+        let region_floor = if masks == MaskSource::Net { region_floor } else { 0.0 };
         let (estimator, config): (Box<dyn Estimator>, WorkspaceConfig) = match kind {
             EstimatorKind::Icp => (
                 Box::new(IcpEstimator::new(objects, IcpConfig::default())?),
@@ -812,7 +817,8 @@ impl Runner {
         fusepose_estimator::poses::remove_marked(&mut self.scores, &dropped);
     }
 
-    /// Drops the pose more inside another ([`fusepose_estimator::interpenetration`]), as the daemon.
+    /// Drops the pose whose region another pose explains
+    /// ([`fusepose_estimator::explained`]), as the daemon.
     fn suppress_explained(&mut self, view: &FrameView<'_>) {
         let Some(verifier) = self.verifier.as_mut() else { return };
         let ws = &self.workspace;
@@ -832,6 +838,7 @@ impl Runner {
         fusepose_estimator::poses::remove_marked(&mut self.scores, &dropped);
     }
 
+    /// Drops the pose more inside another ([`fusepose_estimator::interpenetration`]), as the daemon.
     fn suppress_interpenetrating(&mut self) {
         let mut dropped = Vec::new();
         self.interpenetrating +=

@@ -277,9 +277,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         StageArg::Refine => Stage::Refine,
         StageArg::Both => Stage::Both,
         StageArg::Seg => return seg::run(set, &args),
-        StageArg::Calibrate => {
-            return seg::calibrate_file(&set, &args, &args.out, seg::CALIBRATION_FRAMES).map(|_| ());
-        }
+        StageArg::Calibrate => return seg::calibrate_file(&set, &args, &args.out).map(|_| ()),
         StageArg::All => return pipeline::run(&args),
     };
     if args.bench_engine {

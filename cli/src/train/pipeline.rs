@@ -115,7 +115,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         std::fs::copy(work.pose(), &tmp).with_context(|| format!("copying {}", work.pose().display()))?;
         super::seg::embed_into(&work.seg(), &tmp)?;
         // How sure this segmenter is of real objects sets the verifier's certainty threshold.
-        super::seg::calibrate_file(&super::training_objects(args)?, args, &tmp, super::seg::CALIBRATION_FRAMES)?;
+        super::seg::calibrate_file(&super::training_objects(args)?, args, &tmp)?;
         std::fs::rename(&tmp, work.pose_seg())?;
     }
 

@@ -59,13 +59,13 @@ pub fn embed_into(seg_path: &Path, pose_path: &Path) -> anyhow::Result<()> {
 pub const CALIBRATION_FRAMES: usize = 400;
 
 /// Measures how sure the segmenter in `path` (either layout) is of real
-/// objects on `frames` rendered frames drawn like its training data
-/// (`fusepose_train::seg::certainty`) and stores the result in the file.
-pub fn calibrate_file(set: &ObjectSet, args: &Args, path: &Path, frames: usize) -> anyhow::Result<file::Certainty> {
+/// objects on [`CALIBRATION_FRAMES`] rendered frames drawn like its training
+/// data (`fusepose_train::seg::certainty`) and stores the result in the file.
+pub fn calibrate_file(set: &ObjectSet, args: &Args, path: &Path) -> anyhow::Result<file::Certainty> {
     let mut engine =
         SegEngine::load(path, set).with_context(|| format!("loading the segmenter in {}", path.display()))?;
     let t = Instant::now();
-    let c = certainty::calibrate(&mut engine, set, &super::training_sampler(args), frames)?;
+    let c = certainty::calibrate(&mut engine, set, &super::training_sampler(args), CALIBRATION_FRAMES)?;
     file::store_certainty(path, &c).with_context(|| format!("writing the calibration into {}", path.display()))?;
     let q = |p: f32| c.quantile(p).unwrap_or(f32::NAN);
     println!(

@@ -74,13 +74,14 @@ pub fn calibrate(
 
 /// What the calibration frames were, for the file's record.
 fn sampler_summary(s: &SamplerConfig) -> String {
+    let k = render_camera(s);
     format!(
         "segmenter validation seeds from {:#x}, randomize {:?}, depth sensor {:?}, {}x{} camera",
         SEG_VAL_SEED_BASE + SEED_OFFSET,
         s.randomize,
         s.depth_sensor,
-        render_camera(s).width,
-        render_camera(s).height
+        k.width,
+        k.height
     )
 }
 
