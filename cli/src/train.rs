@@ -152,6 +152,10 @@ pub struct Args {
     /// file without one as it is, e.g. to fine-tune the shipped segmenter).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub seg_offsets: bool,
+    /// `--stage seg`: threads rendering training frames (default: one per
+    /// core; the frames, and so the trained weights, are the same for any count).
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
+    pub seg_data_threads: Option<u16>,
     /// Domain randomisation of the rendered training scenes: off | default | strong
     /// (lights, shadows, materials, camera pipeline, tables, distractors, viewpoints).
     #[arg(long, default_value = "default")]

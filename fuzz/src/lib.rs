@@ -426,6 +426,7 @@ pub fn fuzz_objects(num_classes: usize) -> ObjectSet {
             diameter: 0.05,
             bbox_min: nalgebra_point(0.0),
             bbox_max: nalgebra_point(0.0),
+            shadow_mesh: None,
         })
         .collect();
     ObjectSet { objects }

@@ -301,7 +301,8 @@ mod tests {
             ..Default::default()
         };
         let mut t = RenderTarget::for_intrinsics(&k);
-        render_scene(&[RenderItem { mesh, pose, instance_label: 1 }], &k, &settings, &mut t).unwrap();
+        render_scene(&[RenderItem { mesh, pose, instance_label: 1, shadow_mesh: None }], &k, &settings, &mut t)
+            .unwrap();
         t
     }
 

@@ -28,6 +28,7 @@ pub mod metrics;
 pub mod overlay;
 pub mod render;
 pub mod sampler;
+pub mod shadow_mesh;
 pub mod surface;
 pub mod symmetry_spec;
 pub mod ycbv;

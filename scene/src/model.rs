@@ -96,6 +96,9 @@ pub struct ObjectModel {
     /// Axis-aligned bounding box in the object frame (metres).
     pub bbox_min: Point3<f64>,
     pub bbox_max: Point3<f64>,
+    /// A coarse copy of `mesh` its shadow maps use, when the mesh is fine
+    /// enough to be worth one ([`crate::shadow_mesh`]).
+    pub shadow_mesh: Option<Mesh>,
 }
 
 /// An ordered set of objects. Class id `i + 1` names `objects[i]`; class id 0

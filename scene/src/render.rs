@@ -69,6 +69,9 @@ pub struct RenderItem<'a> {
     pub mesh: &'a Mesh,
     pub pose: Pose,
     pub instance_label: u16,
+    /// Drawn instead of `mesh` into shadow maps (a coarse copy,
+    /// [`crate::shadow_mesh`]); `None`: `mesh` itself.
+    pub shadow_mesh: Option<&'a Mesh>,
 }
 
 /// A directional light. `direction` is a unit vector pointing from the surface
@@ -373,6 +376,10 @@ pub fn render_scene(
             return Err(RenderError::BadPose { item: i });
         }
         validate_mesh(item.mesh).map_err(|reason| RenderError::BadMesh { item: i, reason })?;
+        if let Some(m) = item.shadow_mesh {
+            validate_mesh(m)
+                .map_err(|reason| RenderError::BadMesh { item: i, reason: format!("shadow mesh: {reason}") })?;
+        }
     }
     if settings.per_pixel() {
         if !(settings.shadows.map_size >= 16 && settings.shadows.map_size <= 8192) {

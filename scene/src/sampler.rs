@@ -602,11 +602,16 @@ impl Scene {
             .ok_or(SamplerError::NoSuchView { index: view, count: self.views.len() })?
             .camera_from_table;
         let mut items = Vec::with_capacity(self.objects.len() + 2 + self.extras.distractors.len());
-        items.push(RenderItem { mesh: &self.backdrop.table, pose: cam, instance_label: 0 });
-        items.push(RenderItem { mesh: &self.backdrop.room, pose: cam, instance_label: 0 });
+        items.push(RenderItem { mesh: &self.backdrop.table, pose: cam, instance_label: 0, shadow_mesh: None });
+        items.push(RenderItem { mesh: &self.backdrop.room, pose: cam, instance_label: 0, shadow_mesh: None });
         push_object_items(set, &self.objects, &cam, &mut items)?;
         for d in &self.extras.distractors {
-            items.push(RenderItem { mesh: &d.mesh, pose: cam * d.table_from_object, instance_label: 0 });
+            items.push(RenderItem {
+                mesh: &d.mesh,
+                pose: cam * d.table_from_object,
+                instance_label: 0,
+                shadow_mesh: None,
+            });
         }
         Ok(items)
     }
@@ -817,7 +822,12 @@ fn push_object_items<'a>(
 ) -> Result<(), SamplerError> {
     for (i, o) in objects.iter().enumerate() {
         let model = set.by_class(o.class_id).ok_or(SamplerError::UnknownClass { index: i, class_id: o.class_id })?;
-        items.push(RenderItem { mesh: &model.mesh, pose: cam * o.table_from_object, instance_label: o.instance_label });
+        items.push(RenderItem {
+            mesh: &model.mesh,
+            pose: cam * o.table_from_object,
+            instance_label: o.instance_label,
+            shadow_mesh: model.shadow_mesh.as_ref(),
+        });
     }
     Ok(())
 }

@@ -217,7 +217,8 @@ impl ObjectModel {
         let samples = sample_surface(&mesh, SURFACE_SAMPLES, SURFACE_SAMPLE_SEED)?;
         let diameter = diameter(&used_vertices(&mesh));
         let (bbox_min, bbox_max) = bounding_box(&mesh);
-        Ok(ObjectModel { name: name.into(), mesh, symmetry, samples, diameter, bbox_min, bbox_max })
+        let shadow_mesh = crate::shadow_mesh::shadow_mesh(&mesh, diameter / crate::shadow_mesh::CELLS_PER_DIAMETER);
+        Ok(ObjectModel { name: name.into(), mesh, symmetry, samples, diameter, bbox_min, bbox_max, shadow_mesh })
     }
 }
 

@@ -81,6 +81,7 @@ fn send_scene(
             mesh: &objects.by_class(class).expect("built-in class").mesh,
             pose: camera_from_cell * pose,
             instance_label: class,
+            shadow_mesh: None,
         })
         .collect();
     let mut target = RenderTarget::for_intrinsics(k);

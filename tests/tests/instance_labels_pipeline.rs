@@ -52,7 +52,7 @@ fn render_pair(model: &fusepose_scene::ObjectModel, poses: &[Pose; 2]) -> anyhow
     let items: Vec<RenderItem<'_>> = poses
         .iter()
         .enumerate()
-        .map(|(i, pose)| RenderItem { mesh: &model.mesh, pose: *pose, instance_label: i as u16 + 1 })
+        .map(|(i, pose)| RenderItem { mesh: &model.mesh, pose: *pose, instance_label: i as u16 + 1, shadow_mesh: None })
         .collect();
     render_scene(&items, &k, &RenderSettings::default(), &mut target).map_err(|e| anyhow::anyhow!("{e}"))?;
     Ok(target)

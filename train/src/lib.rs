@@ -7,13 +7,15 @@
 //! Modules: [`model`] (the network), [`geometry`] (rotations), [`loss`]
 //! (DenseFusion loss, symmetry-aware), [`data`] (background sample generation),
 //! [`store`] (checkpoints and the shipped weight file), [`trainer`] (the loop),
-//! [`validate`] (held-out metrics), [`seg`] (the instance segmenter's trainer).
+//! [`validate`] (held-out metrics), [`seg`] (the instance segmenter's trainer),
+//! [`seeded_workers`] (frames rendered on several threads, in seed order).
 
 pub mod bench;
 pub mod data;
 pub mod geometry;
 pub mod loss;
 pub mod model;
+pub mod seeded_workers;
 pub mod seg;
 pub mod store;
 pub mod trainer;

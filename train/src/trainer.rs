@@ -16,6 +16,7 @@ use std::time::{Duration, Instant};
 use anyhow::{Context, bail};
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::prelude::{Device, Int, Tensor, TensorData};
+use crossbeam::channel::RecvTimeoutError;
 use fusepose_estimator::net::meta::{TrainRecord, object_entries};
 use fusepose_estimator::net::{NetConfig, WeightFile};
 use fusepose_scene::ObjectSet;
@@ -260,11 +261,17 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         // Batch: keep a shuffle pool of a few batches (samples of one frame are correlated).
         while pool.len() < 4 * b {
             stream.check()?;
+            // A slow sample is waited for (a process paused with SIGSTOP must
+            // resume); a data thread that died is an error (`check`).
             match stream.rx.recv_timeout(Duration::from_secs(60)) {
                 Ok(x) => pool.push(x),
-                Err(_) => {
+                Err(RecvTimeoutError::Timeout) => {
                     stream.check()?;
-                    bail!("no training data for 60 s");
+                    tracing::warn!("no training sample for 60 s; waiting on");
+                }
+                Err(RecvTimeoutError::Disconnected) => {
+                    stream.check()?;
+                    bail!("the data thread stopped");
                 }
             }
         }

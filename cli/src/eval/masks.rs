@@ -134,8 +134,19 @@ impl NetMasks {
             self.confusion.pixel_accuracy()
         );
         for (i, name) in self.names.iter().enumerate() {
+            // Where its pixels went, when the segmenter gave 5 % or more of them another label.
+            let elsewhere: Vec<String> = (0..=self.names.len())
+                .filter(|&p| p != i + 1)
+                .filter_map(|p| self.confusion.share(i + 1, p).filter(|&s| s >= 0.05).map(|s| (p, s)))
+                .map(|(p, s)| {
+                    let label = if p == 0 { "background" } else { self.names[p - 1].as_str() };
+                    format!("{:.0} % as {label}", 100.0 * s)
+                })
+                .collect();
+            let elsewhere =
+                if elsewhere.is_empty() { String::new() } else { format!("; its pixels: {}", elsewhere.join(", ")) };
             match self.confusion.iou(i + 1) {
-                Some(v) => println!("  {name:<24} IoU {v:.3}"),
+                Some(v) => println!("  {name:<24} IoU {v:.3}{elsewhere}"),
                 None => println!("  {name:<24} IoU -"),
             }
         }

@@ -136,6 +136,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         sampler: super::training_sampler(args),
         small_region_boost: args.seg_small_boost,
         cast_augment: args.seg_cast,
+        data_threads: args.seg_data_threads.map_or_else(fusepose_train::seeded_workers::default_threads, usize::from),
         offsets: args.seg_offsets,
         ..SegTrainConfig::default()
     };

@@ -101,6 +101,7 @@ mod tests {
             diameter: 0.13,
             bbox_min: Point3::origin(),
             bbox_max: Point3::new(0.095, 0.095, 0.0),
+            shadow_mesh: None,
         };
         let cloud = ModelCloud::new(&model).unwrap();
         assert!(cloud.normals.iter().all(|n| n.z.abs() > 0.999));
@@ -119,6 +120,7 @@ mod tests {
             diameter: 0.0,
             bbox_min: Point3::origin(),
             bbox_max: Point3::origin(),
+            shadow_mesh: None,
         };
         assert!(ModelCloud::new(&model).is_none());
     }

@@ -155,6 +155,7 @@ mod tests {
             diameter: 0.1,
             bbox_min: Point3::origin(),
             bbox_max: Point3::origin(),
+            shadow_mesh: None,
         }
     }
 

@@ -86,6 +86,7 @@ impl BoxObject {
             diameter,
             bbox_min: Point3::from(lo),
             bbox_max: Point3::from(hi),
+            shadow_mesh: None,
         }
     }
 

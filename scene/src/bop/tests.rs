@@ -50,6 +50,7 @@ fn box_model(name: &str, half: [f64; 3], symmetry: Symmetry) -> ObjectModel {
         diameter: d,
         bbox_min: Point3::new(-half[0], -half[1], -half[2]),
         bbox_max: Point3::new(half[0], half[1], half[2]),
+        shadow_mesh: None,
     }
 }
 

@@ -66,7 +66,7 @@ fn silhouette_mask_matches_the_rendered_label_map() {
         let model = set.by_class(class_id).unwrap();
         let p = pose([0.4, -0.7, 0.3], [-0.02, 0.01, 0.65]);
         let mut target = RenderTarget::for_intrinsics(&k);
-        let item = RenderItem { mesh: &model.mesh, pose: p, instance_label: 1 };
+        let item = RenderItem { mesh: &model.mesh, pose: p, instance_label: 1, shadow_mesh: None };
         render_scene(&[item], &k, &RenderSettings::default(), &mut target).unwrap();
         let mask = silhouette_mask(&k, &OverlayObject::new(model, class_id, p), k.width, k.height);
         let (mut inter, mut union) = (0usize, 0usize);

@@ -468,7 +468,7 @@ fn rasterise_triangle(frame: &mut Frame<'_>, mut sv: [ScreenVert; 3], ctx: &TriC
 }
 
 /// Depth-only rasterisation (shadow maps): writes the nearest inverse depth
-/// (1/m) per pixel of `items`, each posed by `view_from_cam * item.pose`, into
+/// (1/m) per pixel of `items` (each item's `shadow_mesh` where it has one), each posed by `view_from_cam * item.pose`, into
 /// `inv_depth` (`k.width * k.height`, cleared by the caller). Same coverage
 /// rules and clipping as the colour pass.
 pub(super) fn rasterise_depth(
@@ -486,9 +486,10 @@ pub(super) fn rasterise_depth(
         let rot = pose.rotation.to_rotation_matrix();
         let r = rot.matrix();
         let t = pose.translation.vector;
+        let mesh = item.shadow_mesh.unwrap_or(item.mesh);
         scratch.clear();
-        scratch.extend(item.mesh.positions.iter().map(|q| cam_vertex(r, &t, q, &planes)));
-        for tri in &item.mesh.triangles {
+        scratch.extend(mesh.positions.iter().map(|q| cam_vertex(r, &t, q, &planes)));
+        for tri in &mesh.triangles {
             let (v0, v1, v2) = (&scratch[tri[0] as usize], &scratch[tri[1] as usize], &scratch[tri[2] as usize]);
             let or = v0.outcode | v1.outcode | v2.outcode;
             if or & INVALID != 0 || v0.outcode & v1.outcode & v2.outcode != 0 {

@@ -1,4 +1,5 @@
-//! Shadow maps: per light, the caster items are rasterised depth-only from
+//! Shadow maps: per light, the caster items (their coarse `shadow_mesh` where
+//! they have one) are rasterised depth-only from
 //! the light (a perspective camera at a point light, or 50 m up the direction
 //! of a directional light) over the casters' bounding sphere. The per-pixel
 //! pass then looks each surface point up in every map (2x2 bilinear
@@ -91,7 +92,7 @@ fn caster_sphere(items: &[RenderItem<'_>]) -> Option<(Vector3<f64>, f64)> {
     for item in items {
         let mut mlo = [f32::INFINITY; 3];
         let mut mhi = [f32::NEG_INFINITY; 3];
-        for p in &item.mesh.positions {
+        for p in &item.shadow_mesh.unwrap_or(item.mesh).positions {
             for c in 0..3 {
                 if p[c].is_finite() {
                     mlo[c] = mlo[c].min(p[c]);

@@ -39,7 +39,7 @@ fn tilted_plane_depth_matches_analytic_depth_within_one_u16_unit() {
     let k = k_small();
     let mesh = quad_mesh(0.3, 0.3, 1.0, grey());
     let p = pose([0.5, -0.35, 0.1], [0.02, -0.01, 1.0]);
-    let t = render(&[RenderItem { mesh: &mesh, pose: p, instance_label: 3 }], &k);
+    let t = render(&[RenderItem { mesh: &mesh, pose: p, instance_label: 3, shadow_mesh: None }], &k);
     let n = p.rotation * Vector3::z();
     let d = n.dot(&p.translation.vector);
     let inv = p.inverse();
@@ -78,7 +78,7 @@ fn back_projected_box_depth_lies_on_the_posed_box_surface() {
     let half = [0.04f32, 0.03, 0.05];
     let mesh = box_mesh(half, 1.0, grey());
     let p = pose([0.3, 0.5, 0.2], [0.01, 0.02, 0.6]);
-    let t = render(&[RenderItem { mesh: &mesh, pose: p, instance_label: 7 }], &k);
+    let t = render(&[RenderItem { mesh: &mesh, pose: p, instance_label: 7, shadow_mesh: None }], &k);
     let inv = p.inverse();
     let (mut n, mut sum, mut max) = (0usize, 0.0f64, 0.0f64);
     for v in 0..k.height {
@@ -107,8 +107,10 @@ fn back_projected_box_depth_lies_on_the_posed_box_surface() {
 fn visible_fraction_is_one_alone_and_drops_behind_an_occluder() {
     let k = k_small();
     let mesh = box_mesh([0.05, 0.05, 0.05], 1.0, grey());
-    let back = RenderItem { mesh: &mesh, pose: pose([0.2, 0.3, 0.0], [0.0, 0.0, 0.8]), instance_label: 1 };
-    let front = RenderItem { mesh: &mesh, pose: pose([0.0, 0.4, 0.1], [0.06, 0.0, 0.6]), instance_label: 2 };
+    let back =
+        RenderItem { mesh: &mesh, pose: pose([0.2, 0.3, 0.0], [0.0, 0.0, 0.8]), instance_label: 1, shadow_mesh: None };
+    let front =
+        RenderItem { mesh: &mesh, pose: pose([0.0, 0.4, 0.1], [0.06, 0.0, 0.6]), instance_label: 2, shadow_mesh: None };
     let alone = render(&[back], &k);
     let a = alone.coverage()[0];
     assert_eq!(a.visible_pixels, a.alone_pixels);
@@ -144,7 +146,8 @@ fn texture_quadrants_appear_where_expected() {
         ..Default::default()
     };
     let mut t = RenderTarget::for_intrinsics(&k);
-    render_scene(&[RenderItem { mesh: &mesh, pose: p, instance_label: 1 }], &k, &settings, &mut t).unwrap();
+    render_scene(&[RenderItem { mesh: &mesh, pose: p, instance_label: 1, shadow_mesh: None }], &k, &settings, &mut t)
+        .unwrap();
     let at = |x: f64, y: f64| {
         // Object-frame point → pixel.
         let c = p * Point3::new(x, y, 0.0);
@@ -174,7 +177,8 @@ fn perspective_correct_vertex_colours() {
         ..Default::default()
     };
     let mut t = RenderTarget::for_intrinsics(&k);
-    render_scene(&[RenderItem { mesh: &mesh, pose: p, instance_label: 1 }], &k, &settings, &mut t).unwrap();
+    render_scene(&[RenderItem { mesh: &mesh, pose: p, instance_label: 1, shadow_mesh: None }], &k, &settings, &mut t)
+        .unwrap();
     // The 3D midline (y = 0) must be mid grey in linear light: sRGB 188.
     let c = p * Point3::new(0.0, 0.0, 0.0);
     let (u, v) = k.project(&c).unwrap();
@@ -191,7 +195,7 @@ fn geometry_behind_the_near_plane_is_clipped() {
     let p = pose([std::f64::consts::FRAC_PI_2, 0.0, 0.0], [0.0, 0.3, 0.0]);
     let n = p.rotation * Vector3::z();
     assert!((n - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-9);
-    let t = render(&[RenderItem { mesh: &mesh, pose: p, instance_label: 1 }], &k);
+    let t = render(&[RenderItem { mesh: &mesh, pose: p, instance_label: 1, shadow_mesh: None }], &k);
     let mut covered = 0;
     for v in 0..k.height {
         for u in 0..k.width {
@@ -217,7 +221,7 @@ fn bad_input_is_an_error_not_a_panic() {
     let k = k_small();
     let mut t = RenderTarget::new(10, 10);
     let mesh = box_mesh([0.1; 3], 1.0, grey());
-    let item = RenderItem { mesh: &mesh, pose: pose([0.0; 3], [0.0, 0.0, 1.0]), instance_label: 1 };
+    let item = RenderItem { mesh: &mesh, pose: pose([0.0; 3], [0.0, 0.0, 1.0]), instance_label: 1, shadow_mesh: None };
     assert!(matches!(
         render_scene(&[item], &k, &RenderSettings::default(), &mut t),
         Err(RenderError::SizeMismatch { .. })
@@ -253,7 +257,10 @@ fn bad_input_is_an_error_not_a_panic() {
 fn noisy_plane(cfg: &NoiseConfig, seed: u64) -> RenderTarget {
     let k = k_small();
     let mesh = quad_mesh(2.0, 2.0, 1.0, grey());
-    let mut t = render(&[RenderItem { mesh: &mesh, pose: pose([0.0; 3], [0.0, 0.0, 1.0]), instance_label: 1 }], &k);
+    let mut t = render(
+        &[RenderItem { mesh: &mesh, pose: pose([0.0; 3], [0.0, 0.0, 1.0]), instance_label: 1, shadow_mesh: None }],
+        &k,
+    );
     apply_noise(&mut t, cfg, seed);
     t
 }
@@ -307,7 +314,7 @@ fn noise_drops_depth_at_discontinuities_and_grazing_angles() {
     let floor = quad_mesh(2.0, 2.0, 1.0, grey());
     // A plane turned 80° about x: incidence angles span about 67°..93°.
     let graze = pose([80f64.to_radians(), 0.0, 0.0], [0.0, 0.0, 1.5]);
-    let mut t = render(&[RenderItem { mesh: &floor, pose: graze, instance_label: 1 }], &k);
+    let mut t = render(&[RenderItem { mesh: &floor, pose: graze, instance_label: 1, shadow_mesh: None }], &k);
     let truth = t.depth_m().to_vec();
     let cfg = NoiseConfig { edge_dropout_prob: 0.0, random_dropout_prob: 0.0, ..NoiseConfig::default() };
     apply_noise(&mut t, &cfg, 1);
@@ -333,9 +340,9 @@ fn noise_drops_depth_at_discontinuities_and_grazing_angles() {
     }
     assert!(dropped > 1000 && kept > 1000, "dropped {dropped}, kept {kept}");
 
-    let wall = RenderItem { mesh: &floor, pose: pose([0.0; 3], [0.0, 0.0, 1.2]), instance_label: 0 };
+    let wall = RenderItem { mesh: &floor, pose: pose([0.0; 3], [0.0, 0.0, 1.2]), instance_label: 0, shadow_mesh: None };
     let cube = box_mesh([0.05; 3], 1.0, grey());
-    let item = RenderItem { mesh: &cube, pose: pose([0.0; 3], [0.0, 0.0, 0.7]), instance_label: 1 };
+    let item = RenderItem { mesh: &cube, pose: pose([0.0; 3], [0.0, 0.0, 0.7]), instance_label: 1, shadow_mesh: None };
     let mut t = render(&[wall, item], &k);
     apply_noise(&mut t, &NoiseConfig { grazing_angle_deg: 90.0, ..NoiseConfig::default() }, 2);
     // The cube's silhouette: label changes between horizontal neighbours.
@@ -391,8 +398,8 @@ fn box_on_a_plane_casts_the_geometric_shadow() {
     let plane_pose = pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]);
     let cube_pose = pose([0.0; 3], [-0.05, 0.02, 0.95]);
     let items = [
-        RenderItem { mesh: &plane, pose: plane_pose, instance_label: 0 },
-        RenderItem { mesh: &cube, pose: cube_pose, instance_label: 1 },
+        RenderItem { mesh: &plane, pose: plane_pose, instance_label: 0, shadow_mesh: None },
+        RenderItem { mesh: &cube, pose: cube_pose, instance_label: 1, shadow_mesh: None },
     ];
     let light = Vector3::new(-0.8, 0.25, -0.55).normalize();
     let settings = RenderSettings {
@@ -463,8 +470,13 @@ fn shadows_are_off_by_default_and_items_before_first_caster_cast_none() {
     let plane = quad_mesh(0.6, 0.6, 1.0, grey());
     let cube = box_mesh([0.05; 3], 1.0, grey());
     let items = [
-        RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 0 },
-        RenderItem { mesh: &cube, pose: pose([0.0; 3], [-0.05, 0.02, 0.95]), instance_label: 1 },
+        RenderItem {
+            mesh: &plane,
+            pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
+            instance_label: 0,
+            shadow_mesh: None,
+        },
+        RenderItem { mesh: &cube, pose: pose([0.0; 3], [-0.05, 0.02, 0.95]), instance_label: 1, shadow_mesh: None },
     ];
     assert!(!RenderSettings::default().shadows.enabled);
     let lighting = one_light([-0.8, 0.25, -0.55], 0.2, 0.8);
@@ -488,10 +500,60 @@ fn shadows_are_off_by_default_and_items_before_first_caster_cast_none() {
 }
 
 #[test]
+fn a_coarse_shadow_mesh_casts_the_shadow_of_the_fine_one_and_is_not_drawn() {
+    let k = k_small();
+    let plane = quad_mesh(0.6, 0.6, 1.0, grey());
+    let mut fine = crate::shadow_mesh::sphere(150, 0.04);
+    fine.materials = vec![grey()];
+    let coarse = crate::shadow_mesh::shadow_mesh(&fine, 0.08 / crate::shadow_mesh::CELLS_PER_DIAMETER).unwrap();
+    assert!(coarse.triangles.len() * 3 < fine.triangles.len());
+    let lighting = one_light([-0.8, 0.25, -0.55], 0.2, 0.8);
+    let render_with = |shadow_mesh: Option<&Mesh>| {
+        let items = [
+            RenderItem {
+                mesh: &plane,
+                pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
+                instance_label: 0,
+                shadow_mesh: None,
+            },
+            RenderItem { mesh: &fine, pose: pose([0.0; 3], [-0.05, 0.02, 0.9]), instance_label: 1, shadow_mesh },
+        ];
+        let shadows = ShadowSettings { enabled: true, map_size: 512, ..Default::default() };
+        let s = RenderSettings { lighting: lighting.clone(), shadows, ..Default::default() };
+        let mut t = RenderTarget::for_intrinsics(&k);
+        render_scene(&items, &k, &s, &mut t).unwrap();
+        t
+    };
+    let (a, b) = (render_with(None), render_with(Some(&coarse)));
+    // The colour pass draws the fine mesh either way.
+    assert_eq!(a.labels(), b.labels());
+    assert_eq!(a.depth_u16(), b.depth_u16());
+    let dark = |t: &RenderTarget| -> Vec<bool> {
+        t.rgb().chunks_exact(3).zip(t.labels()).map(|(c, l)| *l == 0 && c[0] < 100).collect()
+    };
+    let (da, db) = (dark(&a), dark(&b));
+    let shadow = da.iter().filter(|&&d| d).count();
+    let differ = da.iter().zip(&db).filter(|(x, y)| x != y).count();
+    assert!(shadow > 300, "the sphere casts a shadow on the plane ({shadow} px)");
+    assert!(differ * 20 < shadow, "{differ} of {shadow} shadow pixels differ");
+    // And it is what the shadow pass draws: moved 6 cm, the shadow moves.
+    let mut moved = coarse.clone();
+    moved.positions.iter_mut().for_each(|p| p[1] += 0.06);
+    let dm = dark(&render_with(Some(&moved)));
+    let overlap = da.iter().zip(&dm).filter(|(x, y)| **x && **y).count();
+    assert!(overlap * 2 < shadow, "a moved shadow mesh left {overlap} of {shadow} shadow pixels in place");
+}
+
+#[test]
 fn per_pixel_mode_matches_gouraud_on_flat_faces_and_adds_highlights() {
     let k = k_small();
     let cube = box_mesh([0.08; 3], 1.0, plain_material("c", [0.4, 0.3, 0.2]));
-    let items = [RenderItem { mesh: &cube, pose: pose([0.4, 0.6, 0.1], [0.0, 0.0, 0.8]), instance_label: 1 }];
+    let items = [RenderItem {
+        mesh: &cube,
+        pose: pose([0.4, 0.6, 0.1], [0.0, 0.0, 0.8]),
+        instance_label: 1,
+        shadow_mesh: None,
+    }];
     let lighting = one_light([0.3, -0.7, -0.65], 0.3, 0.7);
     let gouraud = RenderSettings { lighting: lighting.clone(), ..Default::default() };
     let mut a = RenderTarget::for_intrinsics(&k);
@@ -510,8 +572,12 @@ fn per_pixel_mode_matches_gouraud_on_flat_faces_and_adds_highlights() {
     // highlight sits where the normal bisects light and view (the image centre
     // for a head-on light), and nowhere without specular.
     let plane = quad_mesh(0.5, 0.5, 1.0, grey());
-    let items =
-        [RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 1 }];
+    let items = [RenderItem {
+        mesh: &plane,
+        pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        instance_label: 1,
+        shadow_mesh: None,
+    }];
     let glossy = RenderSettings {
         lighting: one_light([0.0, 0.0, -1.0], 0.1, 0.5),
         item_shading: vec![ItemShading { specular: 0.3, shininess: 200.0, ..Default::default() }],
@@ -531,8 +597,12 @@ fn per_pixel_mode_matches_gouraud_on_flat_faces_and_adds_highlights() {
 fn camera_response_scales_linear_light_and_darkens_corners() {
     let k = k_small();
     let plane = quad_mesh(2.0, 2.0, 1.0, grey());
-    let items =
-        [RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 1 }];
+    let items = [RenderItem {
+        mesh: &plane,
+        pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        instance_label: 1,
+        shadow_mesh: None,
+    }];
     let base = RenderSettings {
         lighting: Lighting { ambient: [0.4; 3], lights: vec![], points: vec![] },
         ..Default::default()
@@ -574,8 +644,12 @@ fn colour_jitter_keeps_grey_and_rotates_hue() {
 fn point_lights_fall_off_with_the_squared_distance() {
     let k = k_small();
     let plane = quad_mesh(2.0, 2.0, 1.0, grey());
-    let items =
-        [RenderItem { mesh: &plane, pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]), instance_label: 1 }];
+    let items = [RenderItem {
+        mesh: &plane,
+        pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        instance_label: 1,
+        shadow_mesh: None,
+    }];
     let render_at = |z: f64| {
         let lighting = Lighting {
             ambient: [0.0; 3],

@@ -270,7 +270,7 @@ pub(super) fn draw_view_effects<'a>(
     if !scene.extras.occluders.is_empty() && rng.random_bool(pick(level, 0.25, 0.4)) {
         let mesh = &scene.extras.occluders[rng.random_range(0..scene.extras.occluders.len())];
         if let Some(pose) = distractors::border_occluder_pose(rng, scene, set, mesh, k, cam) {
-            items.push(RenderItem { mesh, pose, instance_label: 0 });
+            items.push(RenderItem { mesh, pose, instance_label: 0, shadow_mesh: None });
         }
     }
     settings.shadows = ShadowSettings {

@@ -31,6 +31,7 @@ fn model(name: &str, mesh: Mesh, half: [f32; 3]) -> ObjectModel {
         diameter: 2.0 * (h[0] * h[0] + h[1] * h[1] + h[2] * h[2]).sqrt(),
         bbox_min: Point3::new(-h[0], -h[1], -h[2]),
         bbox_max: Point3::new(h[0], h[1], h[2]),
+        shadow_mesh: None,
     }
 }
 

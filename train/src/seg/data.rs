@@ -7,14 +7,11 @@
 //! [`OFFSET_UNIT_CELLS`]). Training augmentation: per-channel colour gain and
 //! bias plus a global brightness shift on the normalised colour, and a
 //! horizontal flip of the full-resolution frame (input and target stay
-//! aligned). A background thread fills a bounded channel.
+//! aligned). Background threads render the frames ([`SegStream`]).
 
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::JoinHandle;
 
 use anyhow::Context;
-use crossbeam::channel::{Receiver, bounded};
 use fusepose_estimator::seg::config::OFFSET_UNIT_CELLS;
 use fusepose_estimator::seg::{FrameMap, SegConfig};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
@@ -23,6 +20,8 @@ use fusepose_scene::sampler::{LabelKind, SamplerConfig, SamplerError, render_vie
 use fusepose_scene::{Intrinsics, ObjectSet};
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
+
+use crate::seeded_workers::{RecvError, SeededWorkers};
 
 /// One rendered frame as the segmenter sees it.
 #[derive(Clone, Debug)]
@@ -224,12 +223,9 @@ pub fn jitter_colour(s: &mut SegSample, cfg: &SegConfig, rng: &mut Pcg64) {
     }
 }
 
-/// A background generator thread feeding a bounded channel.
-pub struct SegStream {
-    pub rx: Receiver<SegSample>,
-    stop: Arc<AtomicBool>,
-    handle: Option<JoinHandle<anyhow::Result<()>>>,
-}
+/// Training frames rendered on `threads` background threads, delivered in
+/// seed order ([`SeededWorkers`]: the same frames for any thread count).
+pub struct SegStream(SeededWorkers<SegSample>);
 
 impl SegStream {
     /// Renders scenes `first_seed, first_seed + 1, …` (augmented) until dropped.
@@ -240,47 +236,23 @@ impl SegStream {
         cast: f64,
         first_seed: u64,
         capacity: usize,
+        threads: usize,
     ) -> anyhow::Result<Self> {
-        let (tx, rx) = bounded(capacity);
-        let stop = Arc::new(AtomicBool::new(false));
-        let stop2 = stop.clone();
-        let handle = std::thread::Builder::new()
-            .name("fusepose-seg-data".into())
-            .spawn(move || -> anyhow::Result<()> {
-                let mut target = RenderTarget::for_intrinsics(&render_camera(&sampler));
-                let mut seed = first_seed;
-                while !stop2.load(Ordering::Relaxed) {
-                    if let Some(s) = frame_sample(&set, &cfg, &sampler, seed, true, cast, &mut target)?
-                        && tx.send(s).is_err()
-                    {
-                        return Ok(());
-                    }
-                    seed += 1;
-                }
-                Ok(())
-            })
-            .context("spawning the data thread")?;
-        Ok(Self { rx, stop, handle: Some(handle) })
+        let camera = render_camera(&sampler);
+        let workers = SeededWorkers::spawn(
+            "fusepose-seg-data",
+            threads,
+            first_seed,
+            capacity,
+            move || Ok(RenderTarget::for_intrinsics(&camera)),
+            move |target, seed| frame_sample(&set, &cfg, &sampler, seed, true, cast, target),
+        )?;
+        Ok(Self(workers))
     }
 
-    /// The generator thread's error, if it has died.
-    pub fn check(&mut self) -> anyhow::Result<()> {
-        if self.handle.as_ref().is_some_and(|h| h.is_finished())
-            && let Some(h) = self.handle.take()
-        {
-            return match h.join() {
-                Ok(r) => r.context("data thread"),
-                Err(_) => Err(anyhow::anyhow!("data thread panicked")),
-            };
-        }
-        Ok(())
-    }
-}
-
-impl Drop for SegStream {
-    fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        while self.rx.try_recv().is_ok() {}
+    /// The next frame, waiting at most `timeout`.
+    pub fn recv_timeout(&mut self, timeout: std::time::Duration) -> Result<SegSample, RecvError> {
+        self.0.recv_timeout(timeout)
     }
 }
 

@@ -26,6 +26,7 @@ use super::loss::{class_weights, offset_l1, small_region_weights, weighted_cross
 use super::model::SegNet;
 use super::store;
 use super::validate::{self, SegValidation};
+use crate::seeded_workers::RecvError;
 use crate::warm_start::WarmStart;
 
 /// Everything a segmenter training run needs. `Default` trains the built-in
@@ -79,6 +80,9 @@ pub struct SegTrainConfig {
     pub sampler: fusepose_scene::sampler::SamplerConfig,
     /// Share of training frames given a camera cast ([`super::data::camera_cast`]); 0 = none.
     pub cast_augment: f64,
+    /// Threads rendering training frames. Rendering, not the network, bounds
+    /// the segmenter's speed; the frames are the same for any count.
+    pub data_threads: usize,
 }
 
 impl Default for SegTrainConfig {
@@ -107,6 +111,7 @@ impl Default for SegTrainConfig {
             small_region_boost: 1.0,
             sampler: fusepose_scene::sampler::SamplerConfig::training(),
             cast_augment: 0.0,
+            data_threads: crate::seeded_workers::default_threads(),
         }
     }
 }
@@ -171,13 +176,18 @@ fn hyper_json(cfg: &SegTrainConfig, weights: &[f32]) -> serde_json::Value {
     })
 }
 
+/// The next training frame. A slow frame is waited for, not an error: a
+/// process paused with SIGSTOP (to benchmark beside it) must resume; a data
+/// thread that died is.
 fn recv(stream: &mut SegStream) -> anyhow::Result<SegSample> {
-    stream.check()?;
-    match stream.rx.recv_timeout(Duration::from_secs(120)) {
-        Ok(s) => Ok(s),
-        Err(_) => {
-            stream.check()?;
-            bail!("no training data for 120 s")
+    recv_patiently(stream, Duration::from_secs(120))
+}
+
+fn recv_patiently(stream: &mut SegStream, warn_after: Duration) -> anyhow::Result<SegSample> {
+    loop {
+        match stream.recv_timeout(warn_after) {
+            Err(RecvError::Timeout(t)) => tracing::warn!("no segmenter training frame for {t:?}; waiting on"),
+            other => return Ok(other?),
         }
     }
 }
@@ -281,20 +291,28 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     record.data = "builtin scene sampler, rendered on the fly with sensor noise".into();
     let start_steps = record.steps;
     log.line(&format!(
-        "# seg start | batch {} lr {} seed {} | resume {:?} at step {} | params {} | {:.1} MMAC/frame",
+        "# seg start | batch {} lr {} seed {} | resume {:?} at step {} | params {} | {:.1} MMAC/frame | {} data threads",
         cfg.batch,
         cfg.lr,
         cfg.seed,
         cfg.resume,
         start_steps,
         arch.parameter_count(),
-        arch.macs() as f64 / 1e6
+        arch.macs() as f64 / 1e6,
+        cfg.data_threads.max(1)
     ));
 
     // Training scenes: far from the pose trainer's and the validation seeds; a resume continues.
     let first_seed = 0x5e90_0000_0000 + (cfg.seed % 1000) * 1_000_000_000 + record.samples + 1;
-    let mut stream =
-        SegStream::spawn(set.clone(), arch.clone(), cfg.sampler.clone(), cfg.cast_augment, first_seed, 4 * cfg.batch)?;
+    let mut stream = SegStream::spawn(
+        set.clone(),
+        arch.clone(),
+        cfg.sampler.clone(),
+        cfg.cast_augment,
+        first_seed,
+        4 * cfg.batch,
+        cfg.data_threads,
+    )?;
 
     // Class weights from the first frames (those frames are trained on too).
     let mut pending: Vec<SegSample> = Vec::new();
@@ -439,6 +457,16 @@ mod tests {
     use burn::store::ModuleSnapshot;
 
     use super::*;
+
+    #[test]
+    fn a_frame_slower_than_the_wait_is_waited_for() {
+        let set = Arc::new(builtin_objects());
+        let sampler = fusepose_scene::sampler::SamplerConfig::training();
+        let mut stream = SegStream::spawn(set.clone(), SegConfig::new(set.len()), sampler, 0.0, 1, 2, 1).unwrap();
+        // A rendered frame takes tens of milliseconds: every wait of 1 ms times out first.
+        let s = recv_patiently(&mut stream, Duration::from_millis(1)).unwrap();
+        assert!(!s.input.is_empty());
+    }
 
     #[test]
     fn warm_start_copies_the_trunk_and_leaves_the_class_head_fresh() {

@@ -65,18 +65,35 @@ impl SegValidation {
     }
 }
 
-/// Intersection and union counts per class.
+/// Intersection and union counts per class, and where each class's pixels went.
 #[derive(Clone, Debug)]
 pub struct Confusion {
     inter: Vec<u64>,
     union: Vec<u64>,
+    /// `[truth * classes + predicted]` pixel counts.
+    matrix: Vec<u64>,
     correct: u64,
     total: u64,
 }
 
 impl Confusion {
     pub fn new(classes: usize) -> Self {
-        Self { inter: vec![0; classes], union: vec![0; classes], correct: 0, total: 0 }
+        Self {
+            inter: vec![0; classes],
+            union: vec![0; classes],
+            matrix: vec![0; classes * classes],
+            correct: 0,
+            total: 0,
+        }
+    }
+
+    /// Share of the pixels of true class `truth` labelled `predicted`; `None`
+    /// when the class has no pixels.
+    pub fn share(&self, truth: usize, predicted: usize) -> Option<f64> {
+        let n = self.inter.len();
+        let row = self.matrix.get(truth * n..(truth + 1) * n)?;
+        let total: u64 = row.iter().sum();
+        (total > 0).then(|| row.get(predicted).copied().unwrap_or(0) as f64 / total as f64)
     }
 
     /// Adds one frame's prediction and truth (class ids; ids beyond the range are ignored).
@@ -85,6 +102,9 @@ impl Confusion {
         for (&p, &t) in pred.iter().zip(truth) {
             let (p, t) = (p as usize, t as usize);
             self.total += 1;
+            if p < n && t < n {
+                self.matrix[t * n + p] += 1;
+            }
             if p == t {
                 self.correct += 1;
                 if t < n {
@@ -167,5 +187,9 @@ mod tests {
         assert!((c.miou() - (1.0 / 3.0 + 0.5) / 2.0).abs() < 1e-12);
         assert!((c.pixel_accuracy() - 0.6).abs() < 1e-12);
         assert_eq!(Confusion::new(2).iou(1), None);
+        // Truth 2's two pixels: one labelled 1, one 2; truth 1's two: one 1, one background.
+        assert_eq!((c.share(2, 1), c.share(2, 2), c.share(2, 0)), (Some(0.5), Some(0.5), Some(0.0)));
+        assert_eq!((c.share(1, 0), c.share(1, 1)), (Some(0.5), Some(0.5)));
+        assert_eq!(Confusion::new(3).share(1, 1), None);
     }
 }

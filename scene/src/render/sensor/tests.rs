@@ -77,8 +77,10 @@ fn structured_light_axial_noise_follows_nguyen_et_al() {
     assert!((p.axial_sigma_m(1.0) - 0.001884).abs() < 1e-9);
     let mesh = wall(0.5);
     for z in [0.5, 1.0] {
-        let mut t =
-            render(&[RenderItem { mesh: &mesh, pose: facing(z), instance_label: 1 }], &RenderSettings::default());
+        let mut t = render(
+            &[RenderItem { mesh: &mesh, pose: facing(z), instance_label: 1, shadow_mesh: None }],
+            &RenderSettings::default(),
+        );
         let truth = t.depth_m().to_vec();
         apply_depth_sensor_model(&mut t, &DepthSensorModel::StructuredLight(p.clone()), 7);
         let d: Vec<f64> = t.depth_m().iter().zip(&truth).map(|(&a, &b)| a as f64 - b as f64).collect();
@@ -94,7 +96,10 @@ fn structured_light_axial_noise_follows_nguyen_et_al() {
 fn structured_light_depth_lies_on_the_disparity_grid() {
     let p = StructuredLightParams { random_dropout_prob: 0.0, ..Default::default() };
     let mesh = wall(0.5);
-    let mut t = render(&[RenderItem { mesh: &mesh, pose: facing(1.0), instance_label: 1 }], &RenderSettings::default());
+    let mut t = render(
+        &[RenderItem { mesh: &mesh, pose: facing(1.0), instance_label: 1, shadow_mesh: None }],
+        &RenderSettings::default(),
+    );
     apply_depth_sensor_model(&mut t, &DepthSensorModel::StructuredLight(p.clone()), 3);
     let fb = k().fx * p.baseline_m;
     let mut levels: Vec<i64> = Vec::new();
@@ -118,8 +123,8 @@ fn projector_shadow_falls_left_of_a_box_by_the_disparity_difference() {
     let p = StructuredLightParams { projector_shadows: true, ..sl_quiet() };
     let (wall_mesh, cube) = (wall(0.5), box_mesh([0.05; 3], 1.0, plain_material("c", [0.5; 3])));
     let items = [
-        RenderItem { mesh: &wall_mesh, pose: facing(1.2), instance_label: 0 },
-        RenderItem { mesh: &cube, pose: pose([0.0; 3], [0.0, 0.0, 0.7]), instance_label: 1 },
+        RenderItem { mesh: &wall_mesh, pose: facing(1.2), instance_label: 0, shadow_mesh: None },
+        RenderItem { mesh: &cube, pose: pose([0.0; 3], [0.0, 0.0, 0.7]), instance_label: 1, shadow_mesh: None },
     ];
     let mut t = render(&items, &RenderSettings::default());
     let labels = t.labels().to_vec();
@@ -158,11 +163,16 @@ fn structured_light_drops_dark_glossy_and_steep_surfaces() {
     let missing = |t: &RenderTarget| t.depth_m().iter().filter(|&&z| z == 0.0).count() as f64 / t.pixel_count() as f64;
     // Black absorbs the pattern: about dark_dropout_prob of the pixels go.
     let (black, grey) = (wall(0.0), wall(0.5));
-    let mut t =
-        render(&[RenderItem { mesh: &black, pose: facing(1.0), instance_label: 1 }], &RenderSettings::default());
+    let mut t = render(
+        &[RenderItem { mesh: &black, pose: facing(1.0), instance_label: 1, shadow_mesh: None }],
+        &RenderSettings::default(),
+    );
     apply_depth_sensor_model(&mut t, &model, 2);
     assert!((missing(&t) - p.dark_dropout_prob).abs() < 0.03, "black wall: {} missing", missing(&t));
-    let mut t = render(&[RenderItem { mesh: &grey, pose: facing(1.0), instance_label: 1 }], &RenderSettings::default());
+    let mut t = render(
+        &[RenderItem { mesh: &grey, pose: facing(1.0), instance_label: 1, shadow_mesh: None }],
+        &RenderSettings::default(),
+    );
     apply_depth_sensor_model(&mut t, &model, 2);
     assert_eq!(missing(&t), 0.0);
     // Glare: a glossy wall lit head-on loses depth in its highlight.
@@ -176,7 +186,7 @@ fn structured_light_drops_dark_glossy_and_steep_surfaces() {
         camera_response: CameraResponse::default(),
         ..Default::default()
     };
-    let mut t = render(&[RenderItem { mesh: &grey, pose: facing(1.0), instance_label: 1 }], &glossy);
+    let mut t = render(&[RenderItem { mesh: &grey, pose: facing(1.0), instance_label: 1, shadow_mesh: None }], &glossy);
     let glare: Vec<usize> =
         (0..t.pixel_count()).filter(|&i| t.specular()[i] as f64 > p.specular_threshold * 255.0).collect();
     assert!(glare.len() > 200 && glare.len() < t.pixel_count() / 2, "{} glare pixels", glare.len());
@@ -186,7 +196,10 @@ fn structured_light_drops_dark_glossy_and_steep_surfaces() {
     // Steeper than 75°: no depth; below 73°: depth.
     let k = k();
     let slant = pose([80f64.to_radians() + std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.5]);
-    let mut t = render(&[RenderItem { mesh: &grey, pose: slant, instance_label: 1 }], &RenderSettings::default());
+    let mut t = render(
+        &[RenderItem { mesh: &grey, pose: slant, instance_label: 1, shadow_mesh: None }],
+        &RenderSettings::default(),
+    );
     let truth = t.depth_m().to_vec();
     apply_depth_sensor_model(&mut t, &DepthSensorModel::StructuredLight(sl_quiet()), 5);
     let n = slant.rotation * Vector3::z();
@@ -215,8 +228,8 @@ fn structured_light_drops_dark_glossy_and_steep_surfaces() {
 fn edges_get_holes_flying_pixels_and_ragged_outlines() {
     let (wall_mesh, cube) = (wall(0.5), box_mesh([0.05; 3], 1.0, plain_material("c", [0.5; 3])));
     let items = [
-        RenderItem { mesh: &wall_mesh, pose: facing(1.2), instance_label: 0 },
-        RenderItem { mesh: &cube, pose: pose([0.3, 0.4, 0.0], [0.0, 0.0, 0.7]), instance_label: 1 },
+        RenderItem { mesh: &wall_mesh, pose: facing(1.2), instance_label: 0, shadow_mesh: None },
+        RenderItem { mesh: &cube, pose: pose([0.3, 0.4, 0.0], [0.0, 0.0, 0.7]), instance_label: 1, shadow_mesh: None },
     ];
     let base = render(&items, &RenderSettings::default());
     let truth = base.depth_m().to_vec();
@@ -262,8 +275,10 @@ fn tof_noise_grows_with_distance_over_amplitude() {
     let k = k();
     for (z, albedo) in [(0.5, 1.0f32), (1.0, 1.0), (1.0, 0.25)] {
         let mesh = wall(albedo);
-        let mut t =
-            render(&[RenderItem { mesh: &mesh, pose: facing(z), instance_label: 1 }], &RenderSettings::default());
+        let mut t = render(
+            &[RenderItem { mesh: &mesh, pose: facing(z), instance_label: 1, shadow_mesh: None }],
+            &RenderSettings::default(),
+        );
         let truth = t.depth_m().to_vec();
         apply_depth_sensor_model(&mut t, &DepthSensorModel::Tof(p.clone()), 8);
         // Normalised residuals over the central pixels (incidence within 3°).
@@ -287,7 +302,10 @@ fn tof_noise_grows_with_distance_over_amplitude() {
     }
     // Too weak a return: no depth.
     let dark = wall(0.02);
-    let mut t = render(&[RenderItem { mesh: &dark, pose: facing(1.0), instance_label: 1 }], &RenderSettings::default());
+    let mut t = render(
+        &[RenderItem { mesh: &dark, pose: facing(1.0), instance_label: 1, shadow_mesh: None }],
+        &RenderSettings::default(),
+    );
     apply_depth_sensor_model(&mut t, &DepthSensorModel::Tof(p), 8);
     assert!(t.depth_m().iter().all(|&z| z == 0.0));
 }
@@ -308,8 +326,8 @@ fn tof_multipath_reads_long_in_a_concave_corner_only() {
         let right = pose([0.0, std::f64::consts::PI + a, 0.0], [h, 0.0, zc + dz]);
         let mut t = render(
             &[
-                RenderItem { mesh: &panel, pose: left, instance_label: 1 },
-                RenderItem { mesh: &panel, pose: right, instance_label: 2 },
+                RenderItem { mesh: &panel, pose: left, instance_label: 1, shadow_mesh: None },
+                RenderItem { mesh: &panel, pose: right, instance_label: 2, shadow_mesh: None },
             ],
             &RenderSettings::default(),
         );
@@ -345,8 +363,8 @@ fn tof_multipath_reads_long_in_a_concave_corner_only() {
 fn ideal_keeps_depth_basic_equals_the_original_model_and_all_are_seeded() {
     let (wall_mesh, cube) = (wall(0.5), box_mesh([0.05; 3], 1.0, plain_material("c", [0.3; 3])));
     let items = [
-        RenderItem { mesh: &wall_mesh, pose: facing(1.2), instance_label: 0 },
-        RenderItem { mesh: &cube, pose: pose([0.3, 0.4, 0.0], [0.0, 0.0, 0.7]), instance_label: 1 },
+        RenderItem { mesh: &wall_mesh, pose: facing(1.2), instance_label: 0, shadow_mesh: None },
+        RenderItem { mesh: &cube, pose: pose([0.3, 0.4, 0.0], [0.0, 0.0, 0.7]), instance_label: 1, shadow_mesh: None },
     ];
     let base = render(&items, &RenderSettings::default());
     let mut ideal = base.clone();
