@@ -83,11 +83,6 @@ impl<T: Send + 'static> SeededWorkers<T> {
         Ok(Self { rxs, next: 0, stop, handles })
     }
 
-    /// Producer threads.
-    pub fn threads(&self) -> usize {
-        self.rxs.len()
-    }
-
     /// The next item in seed order, waiting at most `timeout` for it.
     pub fn recv_timeout(&mut self, timeout: Duration) -> Result<T, RecvError> {
         let deadline = Instant::now() + timeout;

@@ -464,18 +464,23 @@ fn box_on_a_plane_casts_the_geometric_shadow() {
     assert!(dark_right.count() > 10, "no shadow to the right of the cube");
 }
 
+/// `plane` 1 m in front of the camera, facing it: a floor that receives shadows.
+fn floor_facing_camera(plane: &Mesh) -> RenderItem<'_> {
+    RenderItem {
+        mesh: plane,
+        pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
+        instance_label: 0,
+        shadow_mesh: None,
+    }
+}
+
 #[test]
 fn shadows_are_off_by_default_and_items_before_first_caster_cast_none() {
     let k = k_small();
     let plane = quad_mesh(0.6, 0.6, 1.0, grey());
     let cube = box_mesh([0.05; 3], 1.0, grey());
     let items = [
-        RenderItem {
-            mesh: &plane,
-            pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
-            instance_label: 0,
-            shadow_mesh: None,
-        },
+        floor_facing_camera(&plane),
         RenderItem { mesh: &cube, pose: pose([0.0; 3], [-0.05, 0.02, 0.95]), instance_label: 1, shadow_mesh: None },
     ];
     assert!(!RenderSettings::default().shadows.enabled);
@@ -510,12 +515,7 @@ fn a_coarse_shadow_mesh_casts_the_shadow_of_the_fine_one_and_is_not_drawn() {
     let lighting = one_light([-0.8, 0.25, -0.55], 0.2, 0.8);
     let render_with = |shadow_mesh: Option<&Mesh>| {
         let items = [
-            RenderItem {
-                mesh: &plane,
-                pose: pose([std::f64::consts::PI, 0.0, 0.0], [0.0, 0.0, 1.0]),
-                instance_label: 0,
-                shadow_mesh: None,
-            },
+            floor_facing_camera(&plane),
             RenderItem { mesh: &fine, pose: pose([0.0; 3], [-0.05, 0.02, 0.9]), instance_label: 1, shadow_mesh },
         ];
         let shadows = ShadowSettings { enabled: true, map_size: 512, ..Default::default() };
