@@ -35,6 +35,7 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::Context;
+use fusepose_estimator::alternates;
 use fusepose_estimator::net::{NetEstimator, NetOptions};
 use fusepose_estimator::seg::SegEngine;
 use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
@@ -200,6 +201,12 @@ pub struct Args {
     /// needs verification).
     #[arg(long, default_value_t = fusepose_estimator::explained::DEFAULT_MAX_SHARE)]
     pub max_explained: f32,
+    /// `--masks net` with verification: a region whose runner-up class has at
+    /// least this mean segmenter probability is estimated as that class too
+    /// and the better-verified pose kept, as the daemon's
+    /// `estimator.class_alternates` (0 = off).
+    #[arg(long, default_value_t = fusepose_estimator::alternates::DEFAULT_MIN_PROBABILITY)]
+    pub class_alternates: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -461,6 +468,12 @@ struct Runner {
     /// `--max-explained` and the poses it dropped.
     max_explained: f32,
     explained: usize,
+    /// `--class-alternates`, the regions that got an alternate class, the
+    /// alternates kept, and scratch.
+    class_alternates: f32,
+    alternates_tried: usize,
+    alternates_kept: usize,
+    class_means: Vec<f32>,
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -556,7 +569,8 @@ impl Runner {
             masks,
             name,
             estimator,
-            poses: PoseSet::with_capacity(config.max_instances),
+            // Room for each instance's class alternate.
+            poses: PoseSet::with_capacity(2 * config.max_instances),
             workspace,
             table: MetricsTable::for_objects(objects),
             by_visibility: MetricsTable::new(
@@ -604,6 +618,10 @@ impl Runner {
             interpenetrating: 0,
             max_explained: args.max_explained,
             explained: 0,
+            class_alternates: args.class_alternates,
+            alternates_tried: 0,
+            alternates_kept: 0,
+            class_means: Vec::new(),
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -633,6 +651,10 @@ impl Runner {
         let prepared_ok = prepared.is_ok();
         self.joined += self.workspace.stats().joined_parts as usize;
         self.split += self.workspace.stats().split_regions as usize;
+        if let (true, Some(seg), Some(_)) = (prepared_ok, seg, &self.verifier) {
+            self.alternates_tried +=
+                alternates::mark(&mut self.workspace, seg, self.class_alternates, &mut self.class_means);
+        }
         let estimated = match prepared {
             Ok(_) => self.estimator.estimate(&view, &mut self.workspace, &mut self.poses).map(|_| ()),
             Err(e) => Err(e.into()),
@@ -725,11 +747,28 @@ impl Runner {
                             min_region_probability,
                         );
                     }
+                    if alternates::fails_as_alternate(&ws.instances, p, v.fit) {
+                        v.passed = false;
+                    }
                     v
                 })
             })
             .collect();
-        let passed: Vec<bool> = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
+        let mut passed: Vec<bool> = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
+        // Of a region estimated as two classes, the better-verified pose stays (as the daemon).
+        let mut verdicts = verdicts;
+        let mut marks = Vec::new();
+        let key = |i: usize| verdicts[i].map_or((false, f32::NAN), |v| v.class_score());
+        let lost = alternates::losers(self.poses.as_slice(), key, &mut marks);
+        if lost > 0 {
+            self.poses.remove_marked(&marks);
+            fusepose_estimator::poses::remove_marked(&mut verdicts, &marks);
+            fusepose_estimator::poses::remove_marked(&mut passed, &marks);
+        }
+        let instances = &self.workspace.instances;
+        let as_alternate =
+            |p: &&ObjectPose| instances.get(p.instance_id as usize).is_some_and(|i| i.class_id != p.class_id);
+        self.alternates_kept += self.poses.as_slice().iter().filter(as_alternate).count();
         if trace {
             let pairs = match_estimates(&frame.gt, self.poses.as_slice());
             for (p, v) in self.poses.as_slice().iter().zip(&verdicts) {
@@ -873,6 +912,12 @@ impl Runner {
         }
         println!("poses dropped inside another: {}", self.interpenetrating);
         println!("poses dropped as explained by another: {}", self.explained);
+        if self.class_alternates > 0.0 {
+            println!(
+                "class alternates (runner-up probability >= {}): {} regions estimated as a second class, {} kept as it",
+                self.class_alternates, self.alternates_tried, self.alternates_kept
+            );
+        }
         if self.instance_counts.truth > 0 {
             println!("{}", self.instance_counts.summary());
         }

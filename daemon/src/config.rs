@@ -247,6 +247,11 @@ pub struct EstimatorConfig {
     /// explained by the other is dropped (`fusepose_estimator::explained`).
     /// Needs verification. 1 = off.
     pub max_explained_share: f32,
+    /// Built-in segmenter with verification: a region whose runner-up class
+    /// has at least this mean segmenter probability over it is estimated as
+    /// that class too, and the better-verified pose is kept
+    /// (`fusepose_estimator::alternates`). 0 = off.
+    pub class_alternates: f32,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -367,6 +372,7 @@ impl Default for EstimatorConfig {
             duplicates: 0.0,
             max_interpenetration: fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE,
             max_explained_share: fusepose_estimator::explained::DEFAULT_MAX_SHARE,
+            class_alternates: fusepose_estimator::alternates::DEFAULT_MIN_PROBABILITY,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             pin_cpus: Vec::new(),
@@ -611,6 +617,7 @@ impl DaemonConfig {
             ("estimator.verify_max_depth_continuity", e.verify_max_depth_continuity),
             ("estimator.verify_min_thin_mask_agreement", e.verify_min_thin_mask_agreement),
             ("estimator.verify_min_region_probability", e.verify_min_region_probability),
+            ("estimator.class_alternates", e.class_alternates),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(invalid(key, v, "must be in 0..=1"));

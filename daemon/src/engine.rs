@@ -6,6 +6,7 @@
 use std::sync::{Arc, Mutex};
 
 use fusepose_client::{STAGE_COUNT, Stage};
+use fusepose_estimator::alternates;
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
 use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile, VotingMode};
@@ -53,6 +54,9 @@ pub struct EngineSpec {
     /// `estimator.max_explained_share`: of two verified poses, the one whose
     /// region the other explains more than this is dropped (1 = off).
     pub max_explained: f32,
+    /// `estimator.class_alternates`: the runner-up class probability at which a
+    /// segmenter region is estimated as that class too (0 = off).
+    pub class_alternates: f32,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
     /// What the segmenter does with a centre-offset head (`estimator.seg_voting`).
@@ -183,6 +187,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         spec.cut_limits = CutLimits::new(&objects, config.split_regions);
         spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
         spec.max_explained = config.max_explained_share;
+        spec.class_alternates = config.class_alternates;
         if config.max_interpenetration < 1.0 {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
         }
@@ -230,6 +235,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             separations: Vec::new(),
             interpenetration: None,
             max_explained: 1.0,
+            class_alternates: 0.0,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             startup_cost: None,
@@ -251,6 +257,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             separations: Vec::new(),
             interpenetration: None,
             max_explained: 1.0,
+            class_alternates: 0.0,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             startup_cost: None,
@@ -338,6 +345,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         separations: Vec::new(),
         interpenetration: None,
         max_explained: 1.0,
+        class_alternates: 0.0,
         seg_boundary: Boundary::default(),
         seg_voting: VotingMode::Off,
         startup_cost,
@@ -384,6 +392,10 @@ pub struct PoseEngine {
     interpenetration: Option<(Arc<Solids>, f32)>,
     /// `estimator.max_explained_share` (1 = off).
     max_explained: f32,
+    /// `estimator.class_alternates` (0 = off), and the segmenter's per-class
+    /// means of one region (scratch for [`fusepose_estimator::alternates::mark`]).
+    class_alternates: f32,
+    class_means: Vec<f32>,
     scores: Vec<f32>,
     duplicate_marks: Vec<bool>,
     /// The verification of each pose in `poses` (same order), when verifying.
@@ -412,7 +424,10 @@ const POST_ESTIMATE_GAIN: f64 = 0.1;
 /// `verdicts` (same order) and returns how many failed; with `drop` removes
 /// those poses. No allocation.
 /// `segmenter`: the built-in segmenter when it made this frame's regions (its
-/// class probabilities are judged too).
+/// class probabilities are judged too). Of a region estimated as two classes
+/// (`fusepose_estimator::alternates`) only the better-verified pose stays,
+/// before failures are counted (`marks` is scratch for that).
+#[allow(clippy::too_many_arguments)]
 fn verify_poses(
     verifier: Option<&mut Verifier>,
     ws: Option<&Workspace>,
@@ -421,6 +436,7 @@ fn verify_poses(
     verdicts: &mut Vec<Verification>,
     drop: bool,
     frame: &FrameView<'_>,
+    marks: &mut Vec<bool>,
 ) -> usize {
     verdicts.clear();
     let (Some(verifier), Some(ws)) = (verifier, ws) else { return 0 };
@@ -436,6 +452,9 @@ fn verify_poses(
                         min_region_probability,
                     );
                 }
+                if alternates::fails_as_alternate(&ws.instances, pose, v.fit) {
+                    v.passed = false;
+                }
                 v
             }
             None => {
@@ -443,6 +462,10 @@ fn verify_poses(
             }
         };
         verdicts.push(v);
+    }
+    if alternates::losers(poses.as_slice(), |i| verdicts[i].class_score(), marks) > 0 {
+        poses.remove_marked(marks);
+        fusepose_estimator::poses::remove_marked(verdicts, marks);
     }
     let failed = verdicts.iter().filter(|v| !v.passed).count();
     if drop {
@@ -570,7 +593,8 @@ impl PoseEngine {
         Ok(Self {
             estimator,
             workspace,
-            poses: PoseSet::with_capacity(max_instances),
+            // Room for each instance's class alternate.
+            poses: PoseSet::with_capacity(2 * max_instances),
             estimate_stage: spec.estimate_stage,
             segmenter,
             masks: spec.masks,
@@ -579,12 +603,14 @@ impl PoseEngine {
             min_confidence: spec.min_confidence,
             verifier: spec.verify.as_ref().map(|(objects, cfg, _)| Verifier::new(objects, *cfg)),
             verify_drop: spec.verify.as_ref().is_some_and(|v| v.2),
-            verdicts: Vec::with_capacity(max_instances),
+            verdicts: Vec::with_capacity(2 * max_instances),
             separations: spec.separations.clone(),
             interpenetration: spec.interpenetration.clone(),
             max_explained: spec.max_explained,
-            scores: Vec::with_capacity(max_instances),
-            duplicate_marks: Vec::with_capacity(max_instances),
+            class_alternates: spec.class_alternates,
+            class_means: Vec::new(),
+            scores: Vec::with_capacity(2 * max_instances),
+            duplicate_marks: Vec::with_capacity(2 * max_instances),
             rejected: 0,
             failed_verification: 0,
             post_estimate_ns: 0.0,
@@ -615,6 +641,8 @@ impl PoseEngine {
             separations: Vec::new(),
             interpenetration: None,
             max_explained: 1.0,
+            class_alternates: 0.0,
+            class_means: Vec::new(),
             scores: Vec::new(),
             duplicate_marks: Vec::new(),
             rejected: 0,
@@ -667,6 +695,13 @@ impl PoseEngine {
         };
         let t0 = fusepose_client::monotonic_ns();
         let instances = workspace.prepare(frame, seed)?;
+        if used_segmenter
+            && self.verifier.is_some()
+            && let Some(seg) = self.segmenter.as_ref()
+        {
+            let seg = seg.lock().unwrap_or_else(|e| e.into_inner());
+            alternates::mark(workspace, &seg, self.class_alternates, &mut self.class_means);
+        }
         // What verification will take for these instances comes off the estimator's time.
         let reserve = std::time::Duration::from_nanos(
             (POST_ESTIMATE_MARGIN * self.post_estimate_ns * instances.min(workspace.config.max_instances) as f64)
@@ -697,6 +732,7 @@ impl PoseEngine {
                     &mut self.verdicts,
                     self.verify_drop,
                     frame,
+                    &mut self.duplicate_marks,
                 );
                 drop(seg);
                 self.rejected = if self.verify_drop { self.failed_verification } else { 0 };

@@ -9,6 +9,7 @@
 //! frame performs no heap allocation. Depends on `fusepose-scene` for object
 //! models and intrinsics; never on the daemon, client or trainer.
 
+pub mod alternates;
 pub mod cpu_pin;
 pub mod duplicates;
 pub mod explained;

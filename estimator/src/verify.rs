@@ -454,6 +454,15 @@ impl Verifier {
 }
 
 impl Verification {
+    /// How two poses of one region as different classes are ranked
+    /// ([`crate::alternates::losers`]): passed first, then the depth fit
+    /// times the segmenter's peak probability of the class in the region
+    /// (the colour evidence; 1 when not judged).
+    pub fn class_score(&self) -> (bool, f32) {
+        let p = if self.region_probability.is_nan() { 1.0 } else { self.region_probability };
+        (self.passed, self.fit * p)
+    }
+
     /// Adds the segmenter's peak probability `p` of the pose's class in its
     /// region (`SegEngine::region_probability`): below `min` the pose fails.
     /// A region the segmenter was nowhere sure of is where it makes objects

@@ -85,6 +85,10 @@ pub struct Instance {
     pub bbox: [u16; 4],
     /// Crop window in the frame: [u0, v0, side] (square, clamped to the image).
     pub crop_window: [u32; 3],
+    /// A second class to estimate this region as (0 = none), set after
+    /// [`Workspace::prepare`] by [`crate::alternates::mark`] when the
+    /// segmenter was unsure; verification keeps the pose that fits.
+    pub alt_class_id: u16,
 }
 
 impl Instance {
@@ -302,6 +306,7 @@ impl Workspace {
             valid_depth_pixels: valid as u32,
             bbox: component.bbox,
             crop_window: window,
+            alt_class_id: 0,
         });
     }
 

@@ -350,6 +350,13 @@ impl Engine {
     /// Pose net on `sc.points` and `sc.emb` for class index `k` (0-based): fills
     /// `sc.quat`, `sc.trans`, `sc.conf`; returns the index of the most confident point.
     pub fn pose(&self, sc: &mut Scratch, k: usize) -> usize {
+        self.pose_features(sc);
+        self.pose_head(sc, k)
+    }
+
+    /// The class-independent part of [`Engine::pose`]: the fused per-point
+    /// features `sc.h2` that every class's head reads.
+    pub fn pose_features(&self, sc: &mut Scratch) {
         let c = &self.config;
         let n = sc.active;
         let [g0, g1w] = c.geo;
@@ -392,6 +399,14 @@ impl Engine {
         gemm_acc(sc.local.slice(s![..n, ..]), self.p[H1L].w.view(), &mut sc.h1.slice_mut(s![..n, ..]));
         sc.h1.slice_mut(s![..n, ..]).mapv_inplace(|v| v.max(0.0));
         self.p[H2].run(sc.h1.slice(s![..n, ..]), true, sc.h2.slice_mut(s![..n, ..]));
+    }
+
+    /// Class `k`'s head on the features of the last [`Engine::pose_features`]:
+    /// fills `sc.quat`, `sc.trans`, `sc.conf`; returns the most confident point.
+    /// A second class costs only this (three narrow columns per point).
+    pub fn pose_head(&self, sc: &mut Scratch, k: usize) -> usize {
+        let c = &self.config;
+        let n = sc.active;
         self.p[ROT].run_cols(sc.h2.slice(s![..n, ..]), k, 4, sc.quat.slice_mut(s![..n, ..]));
         self.p[TRA].run_cols(sc.h2.slice(s![..n, ..]), k, 3, sc.trans.slice_mut(s![..n, ..]));
         self.p[CONF].run_cols(sc.h2.slice(s![..n, ..]), k, 1, sc.conf.slice_mut(s![..n, ..]));

@@ -72,6 +72,8 @@ struct FrameJob<'a> {
 #[derive(Clone, Copy, Debug)]
 struct InstanceResult {
     pose: ObjectPose,
+    /// The same region as its alternate class, when one was estimated.
+    alternate: Option<ObjectPose>,
     prior: Prior,
     outcome: TrackOutcome,
     times: ObjectTimes,
@@ -201,38 +203,101 @@ fn estimate_instance(
             let prior = Prior { rotation: rot, translation: t, confidence: prior.confidence };
             // No pose net ran: keep its cost model out of this object's times.
             times.pose = Duration::ZERO;
-            return InstanceResult { pose, prior, outcome: TrackOutcome { tracked: true, fit_m }, times };
+            return InstanceResult {
+                pose,
+                alternate: None,
+                prior,
+                outcome: TrackOutcome { tracked: true, fit_m },
+                times,
+            };
         }
     }
     let best = engine.pose(sc, k);
     times.pose = since(&mut clock);
+    let head = HeadPose { inst, i, k, best };
+    let (pose, rot, t) = refined_head_pose(engine, sc, head, &mut refine_ready, job, &mut times, &mut clock);
+    let alternate = alternate_pose(engine, sc, inst, i, &mut refine_ready, job, &mut times, &mut clock);
+    let fit_m = if job.fit.is_some() { fit_of(&rot, &t) } else { f64::NAN };
+    InstanceResult {
+        pose,
+        alternate,
+        prior: Prior { rotation: rot, translation: t, confidence: pose.confidence },
+        outcome: TrackOutcome { tracked: false, fit_m },
+        times,
+    }
+}
+
+/// Which head's output to turn into a pose: instance `i` as class index `k`,
+/// from its most confident point `best`.
+#[derive(Clone, Copy)]
+struct HeadPose {
+    inst: crate::Instance,
+    i: usize,
+    k: usize,
+    best: usize,
+}
+
+/// Class `head.k`'s pose from the head output in `sc`, refined as far as the
+/// plan and the deadline allow; also the refined rotation and translation.
+fn refined_head_pose(
+    engine: &Engine,
+    sc: &mut Scratch,
+    head: HeadPose,
+    refine_ready: &mut bool,
+    job: &FrameJob<'_>,
+    times: &mut ObjectTimes,
+    clock: &mut Instant,
+) -> (ObjectPose, Matrix3<f32>, Vector3<f32>) {
+    let best = head.best;
     let q = [sc.quat[[best, 0]], sc.quat[[best, 1]], sc.quat[[best, 2]], sc.quat[[best, 3]]];
     let confidence = sc.conf[[best, 0]];
     let mut rot = quat_matrix(q);
     let mut t = Vector3::new(sc.trans[[best, 0]], sc.trans[[best, 1]], sc.trans[[best, 2]]);
     let mut done = 0;
-    let setup_ns = if refine_ready { 0.0 } else { job.setup_ns };
+    let setup_ns = if *refine_ready { 0.0 } else { job.setup_ns };
     if job.plan.refine_iterations > 0 && budget::step_fits(job.deadline, setup_ns + job.iter_ns) {
-        if !refine_ready {
+        if !*refine_ready {
             engine.refine_color(sc);
-            times.refine_setup = since(&mut clock);
+            times.refine_setup = since(clock);
+            *refine_ready = true;
         }
-        done = refine_loop(engine, sc, k, &mut rot, &mut t, job.plan.refine_iterations, job);
-        times.refine = since(&mut clock);
+        done = refine_loop(engine, sc, head.k, &mut rot, &mut t, job.plan.refine_iterations, job);
+        times.refine += since(clock);
     }
-    times.refine_iterations = done;
-    let mut pose = finish_pose(inst, i, &rot, &t, confidence, done);
+    times.refine_iterations += done;
+    let mut pose = finish_pose(head.inst, head.i, &rot, &t, confidence, done);
+    pose.class_id = head.k as u16 + 1;
     if done == 0 {
         // The pose net's own quaternion (no matrix round trip).
         pose.rotation = unit_quat(q);
     }
-    let fit_m = if job.fit.is_some() { fit_of(&rot, &t) } else { f64::NAN };
-    InstanceResult {
-        pose,
-        prior: Prior { rotation: rot, translation: t, confidence },
-        outcome: TrackOutcome { tracked: false, fit_m },
-        times,
+    (pose, rot, t)
+}
+
+/// The instance's pose as its alternate class ([`crate::Instance::alt_class_id`]),
+/// from the same fused features: only that class's head and refiner run, and
+/// only while the deadline leaves room for all of the refiner's iterations
+/// (an alternate is the first thing a late frame sheds).
+#[allow(clippy::too_many_arguments)]
+fn alternate_pose(
+    engine: &Engine,
+    sc: &mut Scratch,
+    inst: crate::Instance,
+    i: usize,
+    refine_ready: &mut bool,
+    job: &FrameJob<'_>,
+    times: &mut ObjectTimes,
+    clock: &mut Instant,
+) -> Option<ObjectPose> {
+    let k = (inst.alt_class_id as usize).checked_sub(1)?;
+    if k + 1 == inst.class_id as usize
+        || !budget::step_fits(job.deadline, job.setup_ns + job.iter_ns * job.plan.refine_iterations as f64)
+    {
+        return None;
     }
+    let best = engine.pose_head(sc, k);
+    let head = HeadPose { inst, i, k, best };
+    Some(refined_head_pose(engine, sc, head, refine_ready, job, times, clock).0)
 }
 
 fn finish_pose(
@@ -660,6 +725,9 @@ impl NetEstimator {
             tracks.update(result.pose.class_id, result.prior, result.outcome);
         }
         out.push(result.pose);
+        if let Some(alternate) = result.alternate {
+            out.push(alternate);
+        }
     }
 }
 
@@ -691,6 +759,9 @@ impl Estimator for NetEstimator {
         let k_max = self.engine.config.num_classes;
         if let Some(bad) = ws.instances.iter().find(|i| i.class_id == 0 || i.class_id as usize > k_max) {
             return Err(EstimateError::UnknownClass(bad.class_id));
+        }
+        if let Some(bad) = ws.instances.iter().find(|i| i.alt_class_id as usize > k_max) {
+            return Err(EstimateError::UnknownClass(bad.alt_class_id));
         }
         self.fit(ws);
         let found = ws.instances.len();

@@ -551,12 +551,59 @@ impl SegEngine {
     /// before the first segmentation, for a class the file does not have, or
     /// for a region without pixels. `ids` must be the frame's size.
     pub fn region_probability(&self, ids: &[u32], id: u32, class: u16, bbox: [u16; 4]) -> f32 {
-        let Some(map) = self.map.as_ref() else { return f32::NAN };
-        let (w, h) = map.frame_size();
         let classes = self.config.num_classes + 1;
-        let (out_w, out_h) = map.grid_size();
-        if ids.len() != w * h || class as usize >= classes || out_w * out_h > MAX_CELLS {
+        if class as usize >= classes {
             return f32::NAN;
+        }
+        let mut best = f32::NEG_INFINITY;
+        let cells = self.for_region_cells(ids, id, bbox, |logit, cell| {
+            // log softmax(class) = logit(class) − logsumexp(logits).
+            let max = (0..classes).map(|c| logit(c, cell)).fold(f32::NEG_INFINITY, f32::max);
+            let sum: f32 = (0..classes).map(|c| (logit(c, cell) - max).exp()).sum();
+            best = best.max(logit(class as usize, cell) - max - sum.ln());
+        });
+        if cells == 0 { f32::NAN } else { best.exp() }
+    }
+
+    /// The segmenter's mean softmax probability of each class (index 0 =
+    /// background, then class ids 1..) over the cells under one region (as in
+    /// [`SegEngine::region_probability`]), written to `means`, which must hold
+    /// one value per class and background. Returns the cells averaged (0:
+    /// no segmentation yet, no pixels, or a wrong-sized `ids` or `means`;
+    /// `means` is then all zeros). No allocation.
+    pub fn region_class_means(&self, ids: &[u32], id: u32, bbox: [u16; 4], means: &mut [f32]) -> usize {
+        let classes = self.config.num_classes + 1;
+        means.fill(0.0);
+        if means.len() != classes {
+            return 0;
+        }
+        let cells = self.for_region_cells(ids, id, bbox, |logit, cell| {
+            let max = (0..classes).map(|c| logit(c, cell)).fold(f32::NEG_INFINITY, f32::max);
+            let sum: f32 = (0..classes).map(|c| (logit(c, cell) - max).exp()).sum();
+            for (c, m) in means.iter_mut().enumerate() {
+                *m += (logit(c, cell) - max).exp() / sum;
+            }
+        });
+        means.iter_mut().for_each(|m| *m /= cells.max(1) as f32);
+        cells
+    }
+
+    /// Calls `visit(logit, cell)` once for each segmenter cell under the frame
+    /// pixels with `ids[p] == id` inside `bbox`, where `logit(class, cell)`
+    /// reads the last segmentation; returns how many cells it visited (0
+    /// before the first segmentation or when `ids` is not the frame's size).
+    fn for_region_cells(
+        &self,
+        ids: &[u32],
+        id: u32,
+        bbox: [u16; 4],
+        mut visit: impl FnMut(&dyn Fn(usize, usize) -> f32, usize),
+    ) -> usize {
+        let Some(map) = self.map.as_ref() else { return 0 };
+        let (w, h) = map.frame_size();
+        let (out_w, out_h) = map.grid_size();
+        if ids.len() != w * h || out_w * out_h > MAX_CELLS {
+            return 0;
         }
         let cells = out_w * out_h;
         let logit = |c: usize, cell: usize| self.logits[c * cells + cell];
@@ -567,7 +614,7 @@ impl SegEngine {
         let ((gx0, gy0), (gx1, _)) = (map.cell_of(u0, v0), map.cell_of(u1, v1));
         let span = gx1 + 1 - gx0;
         let mut seen = [0u64; MAX_CELLS / 64];
-        let (mut best, mut best_cell) = (f32::NEG_INFINITY, usize::MAX);
+        let mut visited = 0;
         for v in v0..=v1 {
             for u in u0..=u1 {
                 if ids[v * w + u] != id {
@@ -579,17 +626,11 @@ impl SegEngine {
                     continue;
                 }
                 seen[bit / 64] |= 1 << (bit % 64);
-                let cell = cy * out_w + cx;
-                // log softmax(class) = logit(class) − logsumexp(logits).
-                let max = (0..classes).map(|c| logit(c, cell)).fold(f32::NEG_INFINITY, f32::max);
-                let sum: f32 = (0..classes).map(|c| (logit(c, cell) - max).exp()).sum();
-                let log_p = logit(class as usize, cell) - max - sum.ln();
-                if log_p > best {
-                    (best, best_cell) = (log_p, cell);
-                }
+                visit(&logit, cy * out_w + cx);
+                visited += 1;
             }
         }
-        if best_cell == usize::MAX { f32::NAN } else { best.exp() }
+        visited
     }
 
     /// Runs the network on a prepared input `[4, H0, W0]` and returns the logits `[K+1, H1*W1]`.
