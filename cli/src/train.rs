@@ -156,6 +156,16 @@ pub struct Args {
     /// core; the frames, and so the trained weights, are the same for any count).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
     pub seg_data_threads: Option<u16>,
+    /// Where the networks train: `cpu` (default), or `gpu` / `gpu:N` (the
+    /// N-th discrete GPU, through Vulkan; only in a build with `--features
+    /// gpu`, never the default). Frames are still rendered on the CPU.
+    #[arg(long, default_value = "cpu")]
+    pub device: fusepose_train::device::TrainDevice,
+    /// Pose stages: threads rendering training frames (default: 1 on the cpu,
+    /// whose other cores the network needs; one per core with `--device gpu`).
+    /// The frames, and so the trained weights, are the same for any count.
+    #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
+    pub data_threads: Option<u16>,
     /// Domain randomisation of the rendered training scenes: off | default | strong
     /// (lights, shadows, materials, camera pipeline, tables, distractors, viewpoints).
     #[arg(long, default_value = "default")]
@@ -319,6 +329,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         steps: args.steps,
         resume: args.resume,
         stage,
+        device: args.device,
+        data_threads: args.data_threads.map_or_else(
+            || match args.device {
+                fusepose_train::device::TrainDevice::Cpu => 1,
+                fusepose_train::device::TrainDevice::Gpu(_) => fusepose_train::seeded_workers::default_threads(),
+            },
+            usize::from,
+        ),
         batch: args.batch,
         seed: args.seed,
         lr: args.lr,

@@ -24,14 +24,16 @@
 //! validate; instances are matched to the ground truth of their class whose
 //! visible box centre is nearest.
 
+use std::collections::VecDeque;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::thread::JoinHandle;
 
 use self::rand_distr_free::gauss;
+use crate::seeded_workers::{RecvError, SeededWorkers};
 use anyhow::Context;
-use crossbeam::channel::{Receiver, bounded};
-use fusepose_estimator::seg::SegEngine;
+use crossbeam::channel::{Receiver, RecvTimeoutError, bounded};
+use fusepose_estimator::seg::{SegEngine, SegFile};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig};
 use fusepose_scene::bop::BopDataset;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
@@ -371,85 +373,172 @@ pub fn workspace(set: &ObjectSet, cfg: &DataConfig) -> anyhow::Result<Workspace>
     .map_err(|e| anyhow::anyhow!("workspace: {e}"))
 }
 
-/// A background generator thread feeding a bounded channel.
+/// Training samples from background threads: rendered scenes `first_seed,
+/// first_seed + 1, …` from `threads` render threads merged back into seed
+/// order (the same samples for any count, [`SeededWorkers`]), or BOP training
+/// frames in a fresh seeded shuffle per pass from one thread.
 pub struct Stream {
-    pub rx: Receiver<Sample>,
-    stop: Arc<AtomicBool>,
-    handle: Option<JoinHandle<anyhow::Result<()>>>,
+    source: StreamSource,
+    /// Samples of the last frame not handed out yet.
+    pending: VecDeque<Sample>,
+}
+
+enum StreamSource {
+    Rendered(SeededWorkers<Vec<Sample>>),
+    Bop { rx: Receiver<Sample>, stop: Arc<AtomicBool>, handle: Option<JoinHandle<anyhow::Result<()>>> },
+}
+
+/// The segmenter whose masks a share of rendered training frames get; each
+/// render thread builds its own engine from the file.
+#[derive(Clone)]
+pub struct SegMaskSource {
+    pub file: Arc<SegFile>,
+    /// Share of frames, 0..=1, whose masks come from the segmenter.
+    pub fraction: f64,
 }
 
 impl Stream {
-    /// Produces samples until dropped: rendered scenes `first_seed, first_seed + 1, …`,
-    /// or the BOP training frames in a fresh seeded shuffle per pass.
+    /// Starts the data threads; `capacity` samples (rendered: frames) are buffered.
     pub fn spawn(
         set: Arc<ObjectSet>,
         cfg: DataConfig,
         source: Source,
         first_seed: u64,
         capacity: usize,
-        mut seg: Option<SegMasks>,
-    ) -> Self {
-        let (tx, rx) = bounded(capacity);
-        let stop = Arc::new(AtomicBool::new(false));
-        let stop2 = stop.clone();
-        let handle = std::thread::Builder::new()
-            .name("fusepose-data".into())
-            .spawn(move || -> anyhow::Result<()> {
-                let mut ws = workspace(&set, &cfg)?;
-                let mut target = RenderTarget::for_intrinsics(&cfg.sampler.intrinsics);
-                let mut seed = first_seed;
-                let mut order: Vec<usize> = match &source {
-                    Source::Bop(ds) => bop_indices(ds, false),
-                    Source::Rendered => Vec::new(),
-                };
-                let mut rng = Pcg64::seed_from_u64(first_seed);
-                let mut next = order.len();
-                while !stop2.load(Ordering::Relaxed) {
-                    let samples = match &source {
-                        Source::Rendered => frame_samples(&set, &cfg, seed, &mut ws, &mut target, seg.as_mut())?,
-                        Source::Bop(ds) => {
-                            if order.is_empty() {
-                                anyhow::bail!("the BOP dataset has no training frames");
-                            }
-                            if next >= order.len() {
-                                order.shuffle(&mut rng);
-                                next = 0;
-                            }
-                            next += 1;
-                            bop_frame_samples(ds, order[next - 1], &cfg, seed, &mut ws)?
-                        }
+        seg: Option<SegMaskSource>,
+        threads: usize,
+    ) -> anyhow::Result<Self> {
+        let source = match source {
+            Source::Rendered => {
+                let (set2, cfg2) = (set.clone(), cfg.clone());
+                let init = move || -> anyhow::Result<_> {
+                    let ws = workspace(&set2, &cfg2)?;
+                    let target = RenderTarget::for_intrinsics(&cfg2.sampler.intrinsics);
+                    let seg = match &seg {
+                        Some(s) => Some(SegMasks::new(
+                            SegEngine::new(&s.file).context("building a data thread's segmenter")?,
+                            s.fraction,
+                        )),
+                        None => None,
                     };
-                    for s in samples {
-                        if tx.send(s).is_err() {
-                            return Ok(());
-                        }
-                    }
-                    seed += 1;
-                }
-                Ok(())
-            })
-            .expect("spawning the data thread");
-        Self { rx, stop, handle: Some(handle) }
+                    Ok((ws, target, seg))
+                };
+                let produce = move |(ws, target, seg): &mut (Workspace, RenderTarget, Option<SegMasks>), seed| {
+                    frame_samples(&set, &cfg, seed, ws, target, seg.as_mut()).map(Some)
+                };
+                // A frame holds a few samples: a tenth of the sample capacity in frames.
+                let frames = (capacity / 10).max(threads.max(1) * 2);
+                StreamSource::Rendered(SeededWorkers::spawn(
+                    "fusepose-data",
+                    threads,
+                    first_seed,
+                    frames,
+                    init,
+                    produce,
+                )?)
+            }
+            Source::Bop(ds) => bop_stream(set, cfg, ds, first_seed, capacity),
+        };
+        Ok(Self { source, pending: VecDeque::new() })
     }
 
-    /// Whether the generator thread has died (its error, if any).
-    pub fn check(&mut self) -> anyhow::Result<()> {
-        if self.handle.as_ref().is_some_and(|h| h.is_finished())
-            && let Some(h) = self.handle.take()
-        {
-            return match h.join() {
-                Ok(r) => r.context("data thread"),
-                Err(_) => Err(anyhow::anyhow!("data thread panicked")),
-            };
+    /// The next sample, waiting at most `timeout` for it.
+    pub fn recv_timeout(&mut self, timeout: std::time::Duration) -> Result<Sample, RecvError> {
+        let deadline = std::time::Instant::now() + timeout;
+        loop {
+            if let Some(s) = self.pending.pop_front() {
+                return Ok(s);
+            }
+            let left = deadline.saturating_duration_since(std::time::Instant::now());
+            match &mut self.source {
+                StreamSource::Rendered(workers) => self.pending.extend(workers.recv_timeout(left)?),
+                StreamSource::Bop { rx, handle, .. } => {
+                    return match rx.recv_timeout(left) {
+                        Ok(s) => Ok(s),
+                        Err(RecvTimeoutError::Timeout) => Err(RecvError::Timeout(timeout)),
+                        Err(RecvTimeoutError::Disconnected) => Err(match handle.take().map(JoinHandle::join) {
+                            Some(Ok(Err(e))) => RecvError::Worker(e),
+                            Some(Err(_)) => RecvError::Panicked,
+                            Some(Ok(Ok(()))) | None => RecvError::Stopped,
+                        }),
+                    };
+                }
+            }
         }
-        Ok(())
     }
+
+    /// A sample that is ready now, if any.
+    pub fn try_recv(&mut self) -> Option<Sample> {
+        self.recv_timeout(std::time::Duration::ZERO).ok()
+    }
+
+    /// A data thread's error, if one has died.
+    pub fn check(&mut self) -> Result<(), RecvError> {
+        match &mut self.source {
+            StreamSource::Rendered(workers) => workers.check(),
+            StreamSource::Bop { handle, .. } => {
+                if handle.as_ref().is_some_and(|h| h.is_finished())
+                    && let Some(h) = handle.take()
+                {
+                    return match h.join() {
+                        Ok(Ok(())) => Ok(()),
+                        Ok(Err(e)) => Err(RecvError::Worker(e)),
+                        Err(_) => Err(RecvError::Panicked),
+                    };
+                }
+                Ok(())
+            }
+        }
+    }
+}
+
+/// One thread reading BOP training frames in a fresh seeded shuffle per pass.
+fn bop_stream(
+    set: Arc<ObjectSet>,
+    cfg: DataConfig,
+    ds: Arc<BopDataset>,
+    first_seed: u64,
+    capacity: usize,
+) -> StreamSource {
+    let (tx, rx) = bounded(capacity);
+    let stop = Arc::new(AtomicBool::new(false));
+    let stop2 = stop.clone();
+    let handle = std::thread::Builder::new()
+        .name("fusepose-data".into())
+        .spawn(move || -> anyhow::Result<()> {
+            let mut ws = workspace(&set, &cfg)?;
+            let mut order = bop_indices(&ds, false);
+            if order.is_empty() {
+                anyhow::bail!("the BOP dataset has no training frames");
+            }
+            let mut rng = Pcg64::seed_from_u64(first_seed);
+            let mut next = order.len();
+            let mut seed = first_seed;
+            while !stop2.load(Ordering::Relaxed) {
+                if next >= order.len() {
+                    order.shuffle(&mut rng);
+                    next = 0;
+                }
+                next += 1;
+                for s in bop_frame_samples(&ds, order[next - 1], &cfg, seed, &mut ws)? {
+                    if tx.send(s).is_err() {
+                        return Ok(());
+                    }
+                }
+                seed += 1;
+            }
+            Ok(())
+        })
+        .expect("spawning the data thread");
+    StreamSource::Bop { rx, stop, handle: Some(handle) }
 }
 
 impl Drop for Stream {
     fn drop(&mut self) {
-        self.stop.store(true, Ordering::Relaxed);
-        // Unblock a pending send by draining, then let the thread exit on its own.
-        while self.rx.try_recv().is_ok() {}
+        if let StreamSource::Bop { rx, stop, .. } = &self.source {
+            stop.store(true, Ordering::Relaxed);
+            // Unblock a pending send by draining, then let the thread exit on its own.
+            while rx.try_recv().is_ok() {}
+        }
     }
 }

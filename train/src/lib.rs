@@ -1,7 +1,7 @@
 //! # fusepose-train — the trainer
 //!
 //! Trains the fusion network and its integrated refiner with burn (flex CPU
-//! backend) on scenes rendered on the fly, and writes the safetensors file the
+//! backend; a Vulkan GPU with the opt-in `gpu` feature, [`device`]) on scenes rendered on the fly, and writes the safetensors file the
 //! estimator engine loads. Touches files and CPU threads; never IPC.
 //!
 //! Modules: [`model`] (the network), [`geometry`] (rotations), [`loss`]
@@ -12,6 +12,7 @@
 
 pub mod bench;
 pub mod data;
+pub mod device;
 pub mod geometry;
 pub mod loss;
 pub mod model;

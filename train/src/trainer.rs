@@ -15,8 +15,7 @@ use std::time::{Duration, Instant};
 
 use anyhow::{Context, bail};
 use burn::optim::{AdamConfig, GradientsParams};
-use burn::prelude::{Device, Int, Tensor, TensorData};
-use crossbeam::channel::RecvTimeoutError;
+use burn::prelude::{Int, Tensor, TensorData};
 use fusepose_estimator::net::meta::{TrainRecord, object_entries};
 use fusepose_estimator::net::{NetConfig, WeightFile};
 use fusepose_scene::ObjectSet;
@@ -25,13 +24,13 @@ use rand::seq::SliceRandom;
 use rand::{Rng, SeedableRng};
 use rand_pcg::Pcg64;
 
-use crate::data::{DataConfig, Sample, SegMasks, Source, Stream};
+use crate::data::{DataConfig, Sample, SegMaskSource, Source, Stream};
 use crate::geometry::{pose_from_parts, rot_rows};
 use crate::loss::{GtInstance, model_tensor, pose_loss, refine_loss};
 use crate::model::FusionNet;
+use crate::seeded_workers::RecvError;
 use crate::store;
 use crate::validate::{self, Validation};
-use fusepose_estimator::seg::SegEngine;
 use fusepose_estimator::seg::file::{SegFile, embed, has_embedded};
 
 /// Steps of linear learning-rate warm-up at the start of every run.
@@ -90,6 +89,12 @@ pub struct TrainOptions {
     pub sampler: fusepose_scene::sampler::SamplerConfig,
     /// Samples per object per rendered frame ([`DataConfig::views_per_frame`]).
     pub views_per_frame: usize,
+    /// Where the network trains ([`crate::device`]).
+    pub device: crate::device::TrainDevice,
+    /// Threads rendering training frames: the samples are the same for any
+    /// count ([`crate::seeded_workers`]). One keeps a 2-core CPU's second core
+    /// for the network; a GPU run wants every core rendering.
+    pub data_threads: usize,
 }
 
 /// What a finished run reports.
@@ -124,7 +129,7 @@ fn random_rotation(rng: &mut Pcg64, max_angle: f64) -> UnitQuaternion<f64> {
 }
 
 /// The segmenter mask source of `opts.seg_masks` (from the file resumed from).
-fn seg_masks(opts: &TrainOptions, set: &ObjectSet) -> anyhow::Result<Option<SegMasks>> {
+fn seg_masks(opts: &TrainOptions, set: &ObjectSet) -> anyhow::Result<Option<SegMaskSource>> {
     if opts.seg_masks <= 0.0 {
         return Ok(None);
     }
@@ -132,9 +137,10 @@ fn seg_masks(opts: &TrainOptions, set: &ObjectSet) -> anyhow::Result<Option<SegM
         bail!("segmenter masks are for rendered training frames only");
     }
     let path = opts.resume.as_ref().context("segmenter masks need --resume with a file that embeds a segmenter")?;
-    let engine =
-        SegEngine::load(path, set).with_context(|| format!("loading the segmenter embedded in {}", path.display()))?;
-    Ok(Some(SegMasks::new(engine, opts.seg_masks)))
+    let file = SegFile::read(path)
+        .and_then(|f| f.check_objects(set).map(|()| f))
+        .with_context(|| format!("loading the segmenter embedded in {}", path.display()))?;
+    Ok(Some(SegMaskSource { file: Arc::new(file), fraction: opts.seg_masks }))
 }
 
 /// Runs training and validation; writes `opts.out`.
@@ -145,7 +151,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     if opts.batch == 0 {
         bail!("batch must be at least 1");
     }
-    let device = Device::flex().autodiff();
+    let device = opts.device.autodiff()?;
     device.seed(opts.seed);
     let objects = object_entries(&set);
     let mut log = Log(match &opts.log {
@@ -186,9 +192,10 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     record.data = opts.data_desc.clone();
     let start_steps = record.steps;
     log.line(&format!(
-        "# start {} | stage {:?} batch {} lr {} seed {} min_visible {} | resume {:?} at step {} | params {}",
+        "# start {} | stage {:?} on {} batch {} lr {} seed {} min_visible {} | resume {:?} at step {} | params {}",
         chrono_like_now(),
         opts.stage,
+        opts.device,
         opts.batch,
         opts.lr,
         opts.seed,
@@ -213,7 +220,8 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         Some(resume) => embedded_segmenter(resume)?,
         None => None,
     };
-    let mut stream = Stream::spawn(set.clone(), data_cfg, opts.source.clone(), first_seed, 512, seg);
+    let mut stream =
+        Stream::spawn(set.clone(), data_cfg, opts.source.clone(), first_seed, 512, seg, opts.data_threads.max(1))?;
     let mut rng = Pcg64::seed_from_u64(opts.seed ^ start_steps.wrapping_mul(0x9e37_79b9));
     let mut optim = AdamConfig::new().init();
 
@@ -263,19 +271,13 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             stream.check()?;
             // A slow sample is waited for (a process paused with SIGSTOP must
             // resume); a data thread that died is an error (`check`).
-            match stream.rx.recv_timeout(Duration::from_secs(60)) {
+            match stream.recv_timeout(Duration::from_secs(60)) {
                 Ok(x) => pool.push(x),
-                Err(RecvTimeoutError::Timeout) => {
-                    stream.check()?;
-                    tracing::warn!("no training sample for 60 s; waiting on");
-                }
-                Err(RecvTimeoutError::Disconnected) => {
-                    stream.check()?;
-                    bail!("the data thread stopped");
-                }
+                Err(RecvError::Timeout(_)) => tracing::warn!("no training sample for 60 s; waiting on"),
+                Err(e) => return Err(e.into()),
             }
         }
-        while let Ok(x) = stream.rx.try_recv() {
+        while let Some(x) = stream.try_recv() {
             if pool.len() >= 256 {
                 break;
             }

@@ -46,6 +46,8 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
         min_visible: 0.1,
         sampler: Default::default(),
         views_per_frame: 1,
+        device: fusepose_train::device::TrainDevice::Cpu,
+        data_threads: 2,
     };
     let summary = train(Arc::new(builtin_objects()), &opts).unwrap();
     assert_eq!(summary.record.steps, start + 2);

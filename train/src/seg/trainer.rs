@@ -83,6 +83,8 @@ pub struct SegTrainConfig {
     /// Threads rendering training frames. Rendering, not the network, bounds
     /// the segmenter's speed; the frames are the same for any count.
     pub data_threads: usize,
+    /// Where the network trains ([`crate::device`]).
+    pub device: crate::device::TrainDevice,
 }
 
 impl Default for SegTrainConfig {
@@ -112,6 +114,7 @@ impl Default for SegTrainConfig {
             sampler: fusepose_scene::sampler::SamplerConfig::training(),
             cast_augment: 0.0,
             data_threads: crate::seeded_workers::default_threads(),
+            device: crate::device::TrainDevice::Cpu,
         }
     }
 }
@@ -229,7 +232,7 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     if cfg.minutes.is_none() && cfg.steps.is_none() {
         bail!("give a time (minutes) or step budget");
     }
-    let device = Device::flex().autodiff();
+    let device = cfg.device.autodiff()?;
     device.seed(cfg.seed);
     let objects = object_entries(&set);
     if let Some(dir) = cfg.log.as_deref().and_then(|p| p.parent()).filter(|d| !d.as_os_str().is_empty()) {
@@ -291,7 +294,8 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     record.data = "builtin scene sampler, rendered on the fly with sensor noise".into();
     let start_steps = record.steps;
     log.line(&format!(
-        "# seg start | batch {} lr {} seed {} | resume {:?} at step {} | params {} | {:.1} MMAC/frame | {} data threads",
+        "# seg start on {} | batch {} lr {} seed {} | resume {:?} at step {} | params {} | {:.1} MMAC/frame | {} data threads",
+        cfg.device,
         cfg.batch,
         cfg.lr,
         cfg.seed,
