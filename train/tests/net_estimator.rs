@@ -119,6 +119,26 @@ fn estimates_a_rendered_frame_without_allocating_after_warm_up() {
     assert!(out.as_slice().iter().all(|p| p.iterations == 0));
     est.estimate(&frame, &mut ws, &mut out).unwrap();
     assert!(out.as_slice().iter().all(|p| p.iterations == 2));
+
+    // A class alternate for every instance: two poses each (the segmenter's
+    // class first), still no allocation, and the two-thread split still
+    // equals one thread.
+    for inst in ws.instances.iter_mut() {
+        inst.alt_class_id = inst.class_id % set.len() as u16 + 1;
+    }
+    let mut alt = PoseSet::with_capacity(16);
+    est.estimate(&frame, &mut ws, &mut alt).unwrap();
+    assert_eq!(alt.len(), 2 * count);
+    for (i, pair) in alt.as_slice().chunks(2).enumerate() {
+        assert_eq!((pair[0].instance_id, pair[1].instance_id), (i as u16, i as u16));
+        assert_eq!((pair[0].class_id, pair[1].class_id), (ws.instances[i].class_id, ws.instances[i].alt_class_id));
+        assert_eq!(pair[0], out.as_slice()[i], "the segmenter's class is estimated as without an alternate");
+    }
+    let allocs = allocations_in(|| est.estimate(&frame, &mut ws, &mut alt).unwrap());
+    assert_eq!(allocs, 0, "allocations in a warm estimate with alternates");
+    let mut alt1 = PoseSet::with_capacity(16);
+    one.estimate(&frame, &mut ws, &mut alt1).unwrap();
+    assert_eq!(alt1.as_slice(), alt.as_slice());
 }
 
 /// Rewrites a valid file with `edit` applied to its tensors and metadata.
