@@ -651,7 +651,7 @@ impl Runner {
         let prepared_ok = prepared.is_ok();
         self.joined += self.workspace.stats().joined_parts as usize;
         self.split += self.workspace.stats().split_regions as usize;
-        if let (true, Some(seg), Some(_)) = (prepared_ok, seg, &self.verifier) {
+        if let (true, Some(seg), Some(_)) = (prepared_ok && self.class_alternates > 0.0, seg, &self.verifier) {
             self.alternates_tried +=
                 alternates::mark(&mut self.workspace, seg, self.class_alternates, &mut self.class_means);
         }
@@ -732,7 +732,7 @@ impl Runner {
         let trace = std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some();
         // The segmenter's certainty is read only when judged or traced.
         let seg = seg.filter(|_| min_region_probability > 0.0 || trace);
-        let verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
+        let mut verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
             .poses
             .as_slice()
             .iter()
@@ -756,7 +756,6 @@ impl Runner {
             .collect();
         let mut passed: Vec<bool> = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
         // Of a region estimated as two classes, the better-verified pose stays (as the daemon).
-        let mut verdicts = verdicts;
         let mut marks = Vec::new();
         let key = |i: usize| verdicts[i].map_or((false, f32::NAN), |v| v.class_score());
         let lost = alternates::losers(self.poses.as_slice(), key, &mut marks);
@@ -766,9 +765,7 @@ impl Runner {
             fusepose_estimator::poses::remove_marked(&mut passed, &marks);
         }
         let instances = &self.workspace.instances;
-        let as_alternate =
-            |p: &&ObjectPose| instances.get(p.instance_id as usize).is_some_and(|i| i.class_id != p.class_id);
-        self.alternates_kept += self.poses.as_slice().iter().filter(as_alternate).count();
+        self.alternates_kept += self.poses.as_slice().iter().filter(|p| alternates::is_alternate(instances, p)).count();
         if trace {
             let pairs = match_estimates(&frame.gt, self.poses.as_slice());
             for (p, v) in self.poses.as_slice().iter().zip(&verdicts) {

@@ -463,7 +463,8 @@ fn verify_poses(
         };
         verdicts.push(v);
     }
-    if alternates::losers(poses.as_slice(), |i| verdicts[i].class_score(), marks) > 0 {
+    let any_alternate = ws.instances.iter().any(|i| i.alt_class_id != 0);
+    if any_alternate && alternates::losers(poses.as_slice(), |i| verdicts[i].class_score(), marks) > 0 {
         poses.remove_marked(marks);
         fusepose_estimator::poses::remove_marked(verdicts, marks);
     }
@@ -608,7 +609,8 @@ impl PoseEngine {
             interpenetration: spec.interpenetration.clone(),
             max_explained: spec.max_explained,
             class_alternates: spec.class_alternates,
-            class_means: Vec::new(),
+            // One mean per class and background: filled without allocating.
+            class_means: Vec::with_capacity(spec.segmenter.as_ref().map_or(0, |s| s.config.num_classes + 1)),
             scores: Vec::with_capacity(2 * max_instances),
             duplicate_marks: Vec::with_capacity(2 * max_instances),
             rejected: 0,
@@ -696,6 +698,7 @@ impl PoseEngine {
         let t0 = fusepose_client::monotonic_ns();
         let instances = workspace.prepare(frame, seed)?;
         if used_segmenter
+            && self.class_alternates > 0.0
             && self.verifier.is_some()
             && let Some(seg) = self.segmenter.as_ref()
         {

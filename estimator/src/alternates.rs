@@ -26,12 +26,16 @@ pub const DEFAULT_MIN_PROBABILITY: f32 = 0.0;
 pub const MIN_FIT: f32 = 0.7;
 
 /// Whether `pose` is its instance's alternate class (not the class the
-/// instance was segmented as) and its verification `fit` is below [`MIN_FIT`]:
-/// such a pose fails.
+/// instance was segmented as).
+pub fn is_alternate(instances: &[crate::Instance], pose: &ObjectPose) -> bool {
+    instances.get(pose.instance_id as usize).is_some_and(|i| i.class_id != pose.class_id)
+}
+
+/// Whether `pose` is an alternate ([`is_alternate`]) whose verification `fit`
+/// is below [`MIN_FIT`]: such a pose fails.
 pub fn fails_as_alternate(instances: &[crate::Instance], pose: &ObjectPose, fit: f32) -> bool {
-    let alternate = instances.get(pose.instance_id as usize).is_some_and(|i| i.class_id != pose.class_id);
     // A NaN fit (nothing judged) fails too.
-    alternate && (fit < MIN_FIT || fit.is_nan())
+    is_alternate(instances, pose) && (fit < MIN_FIT || fit.is_nan())
 }
 
 /// Sets each instance's [`crate::Instance::alt_class_id`] to the class other

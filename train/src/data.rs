@@ -26,13 +26,10 @@
 
 use std::collections::VecDeque;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
-use std::thread::JoinHandle;
 
 use self::rand_distr_free::gauss;
 use crate::seeded_workers::{RecvError, SeededWorkers};
 use anyhow::Context;
-use crossbeam::channel::{Receiver, RecvTimeoutError, bounded};
 use fusepose_estimator::seg::{SegEngine, SegFile};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig};
 use fusepose_scene::bop::BopDataset;
@@ -378,14 +375,9 @@ pub fn workspace(set: &ObjectSet, cfg: &DataConfig) -> anyhow::Result<Workspace>
 /// order (the same samples for any count, [`SeededWorkers`]), or BOP training
 /// frames in a fresh seeded shuffle per pass from one thread.
 pub struct Stream {
-    source: StreamSource,
+    frames: SeededWorkers<Vec<Sample>>,
     /// Samples of the last frame not handed out yet.
     pending: VecDeque<Sample>,
-}
-
-enum StreamSource {
-    Rendered(SeededWorkers<Vec<Sample>>),
-    Bop { rx: Receiver<Sample>, stop: Arc<AtomicBool>, handle: Option<JoinHandle<anyhow::Result<()>>> },
 }
 
 /// The segmenter whose masks a share of rendered training frames get; each
@@ -397,8 +389,15 @@ pub struct SegMaskSource {
     pub fraction: f64,
 }
 
+/// Where a BOP reader is in its shuffled pass over the training frames.
+struct BopPass {
+    order: Vec<usize>,
+    next: usize,
+    rng: Pcg64,
+}
+
 impl Stream {
-    /// Starts the data threads; `capacity` samples (rendered: frames) are buffered.
+    /// Starts the data threads; `capacity` samples (in frames: a tenth) are buffered.
     pub fn spawn(
         set: Arc<ObjectSet>,
         cfg: DataConfig,
@@ -408,12 +407,12 @@ impl Stream {
         seg: Option<SegMaskSource>,
         threads: usize,
     ) -> anyhow::Result<Self> {
-        let source = match source {
+        // A frame holds a few samples.
+        let frames = (capacity / 10).max(threads.max(1) * 2);
+        let frames = match source {
             Source::Rendered => {
                 let (set2, cfg2) = (set.clone(), cfg.clone());
                 let init = move || -> anyhow::Result<_> {
-                    let ws = workspace(&set2, &cfg2)?;
-                    let target = RenderTarget::for_intrinsics(&cfg2.sampler.intrinsics);
                     let seg = match &seg {
                         Some(s) => Some(SegMasks::new(
                             SegEngine::new(&s.file).context("building a data thread's segmenter")?,
@@ -421,25 +420,36 @@ impl Stream {
                         )),
                         None => None,
                     };
-                    Ok((ws, target, seg))
+                    Ok((workspace(&set2, &cfg2)?, RenderTarget::for_intrinsics(&cfg2.sampler.intrinsics), seg))
                 };
                 let produce = move |(ws, target, seg): &mut (Workspace, RenderTarget, Option<SegMasks>), seed| {
                     frame_samples(&set, &cfg, seed, ws, target, seg.as_mut()).map(Some)
                 };
-                // A frame holds a few samples: a tenth of the sample capacity in frames.
-                let frames = (capacity / 10).max(threads.max(1) * 2);
-                StreamSource::Rendered(SeededWorkers::spawn(
-                    "fusepose-data",
-                    threads,
-                    first_seed,
-                    frames,
-                    init,
-                    produce,
-                )?)
+                SeededWorkers::spawn("fusepose-data", threads, first_seed, frames, init, produce)?
             }
-            Source::Bop(ds) => bop_stream(set, cfg, ds, first_seed, capacity),
+            // One thread: the shuffled pass is sequential state.
+            Source::Bop(ds) => {
+                let (ds2, cfg2) = (ds.clone(), cfg.clone());
+                let init = move || -> anyhow::Result<_> {
+                    let order = bop_indices(&ds2, false);
+                    if order.is_empty() {
+                        anyhow::bail!("the BOP dataset has no training frames");
+                    }
+                    let pass = BopPass { next: order.len(), order, rng: Pcg64::seed_from_u64(first_seed) };
+                    Ok((workspace(&set, &cfg2)?, pass))
+                };
+                let produce = move |(ws, pass): &mut (Workspace, BopPass), seed| {
+                    if pass.next >= pass.order.len() {
+                        pass.order.shuffle(&mut pass.rng);
+                        pass.next = 0;
+                    }
+                    pass.next += 1;
+                    bop_frame_samples(&ds, pass.order[pass.next - 1], &cfg, seed, ws).map(Some)
+                };
+                SeededWorkers::spawn("fusepose-data", 1, first_seed, frames, init, produce)?
+            }
         };
-        Ok(Self { source, pending: VecDeque::new() })
+        Ok(Self { frames, pending: VecDeque::new() })
     }
 
     /// The next sample, waiting at most `timeout` for it.
@@ -450,20 +460,7 @@ impl Stream {
                 return Ok(s);
             }
             let left = deadline.saturating_duration_since(std::time::Instant::now());
-            match &mut self.source {
-                StreamSource::Rendered(workers) => self.pending.extend(workers.recv_timeout(left)?),
-                StreamSource::Bop { rx, handle, .. } => {
-                    return match rx.recv_timeout(left) {
-                        Ok(s) => Ok(s),
-                        Err(RecvTimeoutError::Timeout) => Err(RecvError::Timeout(timeout)),
-                        Err(RecvTimeoutError::Disconnected) => Err(match handle.take().map(JoinHandle::join) {
-                            Some(Ok(Err(e))) => RecvError::Worker(e),
-                            Some(Err(_)) => RecvError::Panicked,
-                            Some(Ok(Ok(()))) | None => RecvError::Stopped,
-                        }),
-                    };
-                }
-            }
+            self.pending.extend(self.frames.recv_timeout(left)?);
         }
     }
 
@@ -474,71 +471,6 @@ impl Stream {
 
     /// A data thread's error, if one has died.
     pub fn check(&mut self) -> Result<(), RecvError> {
-        match &mut self.source {
-            StreamSource::Rendered(workers) => workers.check(),
-            StreamSource::Bop { handle, .. } => {
-                if handle.as_ref().is_some_and(|h| h.is_finished())
-                    && let Some(h) = handle.take()
-                {
-                    return match h.join() {
-                        Ok(Ok(())) => Ok(()),
-                        Ok(Err(e)) => Err(RecvError::Worker(e)),
-                        Err(_) => Err(RecvError::Panicked),
-                    };
-                }
-                Ok(())
-            }
-        }
-    }
-}
-
-/// One thread reading BOP training frames in a fresh seeded shuffle per pass.
-fn bop_stream(
-    set: Arc<ObjectSet>,
-    cfg: DataConfig,
-    ds: Arc<BopDataset>,
-    first_seed: u64,
-    capacity: usize,
-) -> StreamSource {
-    let (tx, rx) = bounded(capacity);
-    let stop = Arc::new(AtomicBool::new(false));
-    let stop2 = stop.clone();
-    let handle = std::thread::Builder::new()
-        .name("fusepose-data".into())
-        .spawn(move || -> anyhow::Result<()> {
-            let mut ws = workspace(&set, &cfg)?;
-            let mut order = bop_indices(&ds, false);
-            if order.is_empty() {
-                anyhow::bail!("the BOP dataset has no training frames");
-            }
-            let mut rng = Pcg64::seed_from_u64(first_seed);
-            let mut next = order.len();
-            let mut seed = first_seed;
-            while !stop2.load(Ordering::Relaxed) {
-                if next >= order.len() {
-                    order.shuffle(&mut rng);
-                    next = 0;
-                }
-                next += 1;
-                for s in bop_frame_samples(&ds, order[next - 1], &cfg, seed, &mut ws)? {
-                    if tx.send(s).is_err() {
-                        return Ok(());
-                    }
-                }
-                seed += 1;
-            }
-            Ok(())
-        })
-        .expect("spawning the data thread");
-    StreamSource::Bop { rx, stop, handle: Some(handle) }
-}
-
-impl Drop for Stream {
-    fn drop(&mut self) {
-        if let StreamSource::Bop { rx, stop, .. } = &self.source {
-            stop.store(true, Ordering::Relaxed);
-            // Unblock a pending send by draining, then let the thread exit on its own.
-            while rx.try_recv().is_ok() {}
-        }
+        self.frames.check()
     }
 }
