@@ -70,7 +70,10 @@ fn two_cameras_are_served_apart_and_a_dead_producer_leaves_the_other_alone() -> 
         );
         for p in poses.iter() {
             assert_eq!(p.camera_id, camera_id(own), "{own}: a message of another camera: {p:?}");
-            assert!(sent.contains(&p.sequence), "{own}: pose for a frame it never sent: {p:?}");
+            // SIGKILL can land between a frame's publish and its "sent" line,
+            // so the killed producer's next sequence may be answered too.
+            let cut_short = own == "right" && sent.last().is_some_and(|&last| p.sequence == last + 1);
+            assert!(sent.contains(&p.sequence) || cut_short, "{own}: pose for a frame it never sent: {p:?}");
             assert_ne!(p.status & PoseStatus::OK, 0, "{own}: {p:?}");
         }
     }
