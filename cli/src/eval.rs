@@ -133,6 +133,14 @@ pub struct Args {
     /// for verification to refuse). Default: the engine's, 0.
     #[arg(long)]
     pub seg_background_offset: Option<f32>,
+    /// `--masks net`: regroup the segmenter's cells by the depth image before
+    /// its clean-up: cells standing on the table together that fit inside one
+    /// object of their majority class take that class. `off`, `on`,
+    /// or KEY=VALUE,… over the defaults (height, step, step-per-m, share,
+    /// absorb, absorb-p, slack); default `on`, as the daemon's
+    /// `estimator.seg_depth_regions`.
+    #[arg(long, default_value = "on")]
+    pub seg_depth_regions: DepthRegionsArg,
     /// `--masks net`: how cell labels become frame labels: `cells`,
     /// `erode-cells` or `refine:N` (pixel borders from interpolated logits, N
     /// pixels eroded); default: the engine's.
@@ -322,6 +330,7 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
                 min_interior: args.seg_min_interior,
                 voting: args.seg_voting,
                 background_offset: args.seg_background_offset,
+                depth_regions: args.seg_depth_regions.0,
             };
             Some(NetMasks::load(&weights, &objects, &settings)?)
         }
@@ -1099,5 +1108,17 @@ mod tests {
     #[test]
     fn compare_csv_names_get_the_estimator_suffix() {
         assert_eq!(suffixed(Path::new("out/res.csv"), "icp"), PathBuf::from("out/res_icp.csv"));
+    }
+}
+
+/// `--seg-depth-regions`: `off` or the engine's parameter string.
+#[derive(Clone, Copy, Debug)]
+pub struct DepthRegionsArg(pub Option<fusepose_estimator::seg::DepthRegionParams>);
+
+impl std::str::FromStr for DepthRegionsArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        fusepose_estimator::seg::DepthRegionParams::parse_setting(s).map(Self)
     }
 }

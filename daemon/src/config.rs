@@ -261,6 +261,11 @@ pub struct EstimatorConfig {
     /// class regions, rejoined by `join_parts`) or a peak search
     /// `MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS` (`fusepose_estimator::seg::VotingMode`).
     pub seg_voting: String,
+    /// Built-in segmenter: its cells regrouped by the depth image before the
+    /// clean-up (`fusepose_estimator::seg::DepthRegions`): `on` (the measured
+    /// defaults), `off`, or `KEY=VALUE,…` over the defaults (height, step,
+    /// step-per-m, share, absorb, absorb-p, slack).
+    pub seg_depth_regions: String,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
     pub pin_cpus: Vec<usize>,
@@ -375,6 +380,7 @@ impl Default for EstimatorConfig {
             class_alternates: fusepose_estimator::alternates::DEFAULT_MIN_PROBABILITY,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
+            seg_depth_regions: "on".to_owned(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }
@@ -606,6 +612,13 @@ impl DaemonConfig {
                 "must be \"on\", \"off\" or MIN_VOTES,MERGE_RADIUS_CELLS,MIN_CELLS (e.g. \"6,3,6\")",
             ));
         }
+        if fusepose_estimator::seg::DepthRegionParams::parse_setting(&e.seg_depth_regions).is_err() {
+            return Err(invalid(
+                "estimator.seg_depth_regions",
+                &e.seg_depth_regions,
+                "must be \"on\", \"off\" or KEY=VALUE,... (keys height, step, step-per-m, share, absorb, absorb-p, slack; numbers >= 0)",
+            ));
+        }
         if !["drop", "flag", "off"].contains(&e.verify.as_str()) {
             return Err(invalid("estimator.verify", &e.verify, "must be \"drop\", \"flag\" or \"off\""));
         }
@@ -802,6 +815,11 @@ mod tests {
         assert!(err.starts_with("estimator.seg_voting") && err.contains("\"off\""), "{err}");
         let c = DaemonConfig::parse("[estimator]\nseg_voting = \"12,6,6\"\n").unwrap();
         assert_eq!(c.estimator.seg_voting, "12,6,6");
+        let err = DaemonConfig::parse("[estimator]\nseg_depth_regions = \"share=lots\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.seg_depth_regions") && err.contains("absorb-p"), "{err}");
+        assert_eq!(DaemonConfig::default().estimator.seg_depth_regions, "on");
+        let c = DaemonConfig::parse("[estimator]\nseg_depth_regions = \"off\"\n").unwrap();
+        assert_eq!(c.estimator.seg_depth_regions, "off");
         let c = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode-cells\"\n").unwrap();
         assert_eq!(c.estimator.seg_boundary, "erode-cells");
         let err = DaemonConfig::parse("[estimator.tracking]\nfull_estimate_every = 0\n").unwrap_err().to_string();

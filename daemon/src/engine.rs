@@ -9,7 +9,7 @@ use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::alternates;
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
-use fusepose_estimator::seg::{Boundary, SegEngine, SegError, SegFile, VotingMode};
+use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine, SegError, SegFile, VotingMode};
 use fusepose_estimator::split::CutLimits;
 use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{
@@ -61,6 +61,8 @@ pub struct EngineSpec {
     pub seg_boundary: Boundary,
     /// What the segmenter does with a centre-offset head (`estimator.seg_voting`).
     pub seg_voting: VotingMode,
+    /// `estimator.seg_depth_regions` with the objects' diameters (`None` = off).
+    pub seg_depth_regions: Option<(Vec<f32>, DepthRegionParams)>,
     /// The network's and segmenter's cost measured at start (network only).
     pub startup_cost: Option<crate::startup_cost::StartupCost>,
     /// The segmenter engine every camera of this spec uses (made by the first
@@ -200,9 +202,12 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             config.seg_boundary.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_boundary: {e}"))?;
         spec.seg_voting =
             config.seg_voting.parse().map_err(|e: String| anyhow::anyhow!("estimator.seg_voting: {e}"))?;
+        spec.seg_depth_regions = DepthRegionParams::parse_setting(&config.seg_depth_regions)
+            .map_err(|e| anyhow::anyhow!("estimator.seg_depth_regions: {e}"))?
+            .map(|p| (fusepose_estimator::parts::extents(&objects, 1.0), p));
         spec.masks = config.masks;
         if let (Some(seg), Some(cost)) = (&spec.segmenter, spec.startup_cost.as_mut()) {
-            match crate::startup_cost::measure_segmenter(seg, spec.seg_boundary) {
+            match crate::startup_cost::measure_segmenter(seg, spec.seg_boundary, spec.seg_depth_regions.as_ref()) {
                 Ok(ns) => cost.segment_ns = Some(ns),
                 Err(e) => tracing::warn!(error = %e, "timing the segmenter at start failed"),
             }
@@ -238,6 +243,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             class_alternates: 0.0,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
+            seg_depth_regions: None,
             startup_cost: None,
             shared_segmenter: Default::default(),
         })
@@ -260,6 +266,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             class_alternates: 0.0,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
+            seg_depth_regions: None,
             startup_cost: None,
             shared_segmenter: Default::default(),
         }),
@@ -348,6 +355,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         class_alternates: 0.0,
         seg_boundary: Boundary::default(),
         seg_voting: VotingMode::Off,
+        seg_depth_regions: None,
         startup_cost,
         shared_segmenter: Default::default(),
     })
@@ -585,6 +593,7 @@ impl PoseEngine {
                     let mut seg = SegEngine::new(file).map_err(|e| anyhow::anyhow!("segmenter: {e}"))?;
                     seg.set_boundary(spec.seg_boundary);
                     seg.set_voting_mode(spec.seg_voting);
+                    seg.set_depth_regions(spec.seg_depth_regions.as_ref().map(|(d, p)| DepthRegions::new(d, *p)));
                     seg.set_instance_separation(spec.separations.clone());
                     spec.shared_segmenter.get_or_init(|| Arc::new(Mutex::new(seg))).clone()
                 }

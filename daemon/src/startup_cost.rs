@@ -11,7 +11,7 @@
 use std::time::Instant;
 
 use fusepose_estimator::net::NetEstimator;
-use fusepose_estimator::seg::{Boundary, SegEngine, SegFile};
+use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine, SegFile};
 use fusepose_estimator::{
     ColorFormat, DepthPlane, Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig,
 };
@@ -198,9 +198,14 @@ fn load_average() -> Option<f64> {
 }
 
 /// Times the segmenter of `file` on the synthetic frame (median of a few runs), ns.
-pub fn measure_segmenter(file: &SegFile, boundary: Boundary) -> Result<f64, String> {
+pub fn measure_segmenter(
+    file: &SegFile,
+    boundary: Boundary,
+    depth_regions: Option<&(Vec<f32>, DepthRegionParams)>,
+) -> Result<f64, String> {
     let mut seg = SegEngine::new(file).map_err(|e| e.to_string())?;
     seg.set_boundary(boundary);
+    seg.set_depth_regions(depth_regions.map(|(d, p)| DepthRegions::new(d, *p)));
     let frame = SyntheticFrame::new(1);
     let view = frame.view(false);
     let mut labels = vec![0u16; view.width() * view.height()];

@@ -14,7 +14,7 @@ use std::collections::HashMap;
 use common::{l_block, object_set, step_block};
 use fusepose_estimator::net::meta::{self, object_entries};
 use fusepose_estimator::seg::file::{FORMAT, KEY_CONFIG};
-use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
+use fusepose_estimator::seg::{DepthRegionParams, DepthRegions, FrameMap, SegConfig, SegEngine, SegFile};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig};
 use fusepose_scene::{Intrinsics, ObjectSet};
 use safetensors::tensor::{Dtype, TensorView};
@@ -134,6 +134,8 @@ fn view<'a>(color: &'a [u8], depth: &'a [u16]) -> FrameView<'a> {
 fn segment_does_not_allocate_after_warm_up_and_feeds_the_workspace() {
     let set = object_set(&[l_block(), step_block()]);
     let mut engine = engine(&set);
+    // As the daemon runs it: cells regrouped by depth (the box stands 30 cm off the background plane).
+    engine.set_depth_regions(Some(DepthRegions::new(&[0.3, 0.3], DepthRegionParams::default())));
     let (c0, d0) = frame_planes(0);
     let (c1, d1) = frame_planes(40);
     let mut labels = vec![0u16; 640 * 480];
@@ -157,6 +159,41 @@ fn segment_does_not_allocate_after_warm_up_and_feeds_the_workspace() {
     for i in 0..count {
         assert!(distinct.contains(&ws.instances[i].class_id));
     }
+}
+
+#[test]
+fn depth_regrouping_does_not_allocate_after_warm_up() {
+    // The near box of `frame_planes` labelled class 1 but for its left half
+    // (background), and logits to match: every frame relabels that half.
+    let (c0, d0) = frame_planes(0);
+    let frame = view(&c0, &d0);
+    let map = FrameMap::new(640, 480, &SegConfig::new(2));
+    let (gw, gh) = map.grid_size();
+    let mut labelled = vec![0u16; gw * gh];
+    for y in 0..gh {
+        for x in 0..gw {
+            let (u, v) = (map.span_x(x).start + 4, map.span_y(y).start + 4);
+            if (280..360).contains(&u) && (150..300).contains(&v) {
+                labelled[y * gw + x] = 1;
+            }
+        }
+    }
+    let n = labelled.len();
+    let mut logits = vec![0.0f32; 3 * n];
+    for (i, &c) in labelled.iter().enumerate() {
+        logits[c as usize * n + i] = 3.0;
+    }
+    let mut regions = DepthRegions::new(&[0.3, 0.3], DepthRegionParams::default());
+    let mut cells = labelled.clone();
+    let first = regions.apply(&frame, &map, &logits, &mut cells);
+    assert!(first > 0, "the box's unlabelled half was not regrouped");
+    let mut changed = 0;
+    let allocations = allocations_in(|| {
+        cells.copy_from_slice(&labelled);
+        changed = regions.apply(&frame, &map, &logits, &mut cells);
+    });
+    assert_eq!(allocations, 0, "depth regrouping allocated {allocations} times after warm-up");
+    assert_eq!(changed, first);
 }
 
 #[test]

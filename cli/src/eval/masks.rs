@@ -7,7 +7,7 @@ use std::time::Instant;
 
 use anyhow::Context;
 use fusepose_estimator::seg::voting::VotingMode;
-use fusepose_estimator::seg::{Boundary, SegEngine};
+use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView};
 use fusepose_scene::ObjectSet;
 use fusepose_train::seg::validate::Confusion;
@@ -24,6 +24,8 @@ pub struct SegSettings {
     pub min_interior: Option<usize>,
     pub voting: Option<VotingMode>,
     pub background_offset: Option<f32>,
+    /// Cell labels regrouped by depth (`None` = off).
+    pub depth_regions: Option<DepthRegionParams>,
 }
 
 /// The segmenter with its label buffer and accumulated scores.
@@ -40,6 +42,8 @@ pub struct NetMasks {
     pub ms: Vec<f64>,
     confusion: Confusion,
     names: Vec<String>,
+    /// Cells the depth regrouping relabelled, over all frames.
+    depth_changed: usize,
 }
 
 impl NetMasks {
@@ -51,7 +55,8 @@ impl NetMasks {
     /// Loads the segmenter of `weights` (a network file with one embedded, or
     /// a segmenter file) with `settings` applied over the engine's defaults.
     pub fn load(weights: &Path, objects: &ObjectSet, settings: &SegSettings) -> anyhow::Result<Self> {
-        let SegSettings { min_cells, max_elongation, boundary, min_interior, voting, background_offset } = *settings;
+        let SegSettings { min_cells, max_elongation, boundary, min_interior, voting, background_offset, depth_regions } =
+            *settings;
         let mut engine = SegEngine::load(weights, objects)
             .with_context(|| format!("--masks net: loading the segmenter of {}", weights.display()))?;
         if let Some(n) = min_cells {
@@ -72,6 +77,10 @@ impl NetMasks {
         if let Some(o) = background_offset {
             engine.set_background_offset(o);
         }
+        if let Some(params) = depth_regions {
+            let diameters = fusepose_estimator::parts::extents(objects, 1.0);
+            engine.set_depth_regions(Some(DepthRegions::new(&diameters, params)));
+        }
         Ok(Self {
             engine,
             labels: Vec::new(),
@@ -80,6 +89,7 @@ impl NetMasks {
             ms: Vec::new(),
             confusion: Confusion::new(objects.len() + 1),
             names: objects.objects.iter().map(|o| o.name.clone()).collect(),
+            depth_changed: 0,
         })
     }
 
@@ -99,6 +109,7 @@ impl NetMasks {
         if let fusepose_estimator::LabelPlane::Instances { classes, .. } = plane {
             self.classes.extend_from_slice(classes);
         }
+        self.depth_changed += self.engine.depth_changed_cells();
         let (labels, classes) = (&self.labels, &self.classes);
         self.class_labels.clear();
         if classes.is_empty() {
@@ -133,6 +144,13 @@ impl NetMasks {
             self.confusion.iou(0).unwrap_or(0.0),
             self.confusion.pixel_accuracy()
         );
+        if self.engine.depth_regions().is_some() {
+            println!(
+                "  cells regrouped by depth: {} ({:.1} per frame)",
+                self.depth_changed,
+                self.depth_changed as f64 / self.ms.len().max(1) as f64
+            );
+        }
         for (i, name) in self.names.iter().enumerate() {
             // Where its pixels went, when the segmenter gave 5 % or more of them another label.
             let elsewhere: Vec<String> = (0..=self.names.len())

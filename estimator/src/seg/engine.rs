@@ -14,6 +14,7 @@ use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2};
 
 use super::boundary::{Boundary, BoundaryScratch, refine};
 use super::config::{INPUT_CHANNELS, SegConfig};
+use super::depth_regions::DepthRegions;
 use super::file::{Certainty, SegFile};
 use super::input::FrameMap;
 use super::merge::InstanceMerger;
@@ -220,6 +221,10 @@ pub struct SegEngine {
     /// Subtracted from the background logit before the argmax ([`SegEngine::set_background_offset`]).
     background_offset: f32,
     boundary: Boundary,
+    /// Cell labels regrouped by depth before the clean-up ([`SegEngine::set_depth_regions`]; `None` = off).
+    depth_regions: Option<DepthRegions>,
+    /// Cells [`DepthRegions`] changed in the last frame.
+    depth_changed: usize,
     /// Eroded cell labels ([`Boundary::ErodeCells`]).
     eroded: Vec<u16>,
     /// [`Boundary::Refine`]'s per-frame scratch.
@@ -294,6 +299,8 @@ impl SegEngine {
             min_interior_cells: MIN_INTERIOR_CELLS,
             background_offset: 0.0,
             boundary: Boundary::default(),
+            depth_regions: None,
+            depth_changed: 0,
             eroded: vec![0; hw(1)],
             refine_scratch: BoundaryScratch::default(),
             seen: vec![false; hw(1)],
@@ -411,6 +418,21 @@ impl SegEngine {
         self.boundary = boundary;
     }
 
+    /// Regroups the cell labels by depth before the clean-up ([`DepthRegions`]); `None` (the default) = off.
+    pub fn set_depth_regions(&mut self, regions: Option<DepthRegions>) {
+        self.depth_regions = regions;
+    }
+
+    /// The depth regrouping's parameters (`None` = off).
+    pub fn depth_regions(&self) -> Option<crate::seg::DepthRegionParams> {
+        self.depth_regions.as_ref().map(DepthRegions::params)
+    }
+
+    /// Output cells the depth regrouping relabelled in the last frame (0 when off).
+    pub fn depth_changed_cells(&self) -> usize {
+        self.depth_changed
+    }
+
     /// The current [`Boundary`] mode.
     pub fn boundary(&self) -> Boundary {
         self.boundary
@@ -434,6 +456,10 @@ impl SegEngine {
             self.logits[..n].iter_mut().for_each(|v| *v -= self.background_offset);
         }
         self.argmax();
+        self.depth_changed = match self.depth_regions.as_mut() {
+            Some(regions) => regions.apply(frame, &map, &self.logits, &mut self.cells),
+            None => 0,
+        };
         let (_, out_w) = self.config.output_size();
         drop_small_components(
             &mut self.cells,

@@ -6,11 +6,12 @@
 //! Layout: [`config`] (architecture, tensor shapes, cost), [`file`](mod@file) (weight
 //! file reading and object-set checks), [`input`] (frame ↔ grid tables:
 //! network input, upsampling, training targets), [`engine`] (the forward pass
-//! on preallocated buffers), [`boundary`] (cell labels → frame labels), [`voting`] (instances from centre-offset votes), [`merge`] (instances
+//! on preallocated buffers), [`boundary`] (cell labels → frame labels), [`depth_regions`] (cell labels regrouped by the depth image), [`voting`] (instances from centre-offset votes), [`merge`] (instances
 //! closer in 3D than two copies of their object can be become one). The trainer is `fusepose_train::seg`.
 
 pub mod boundary;
 pub mod config;
+pub mod depth_regions;
 pub mod engine;
 pub mod file;
 pub mod input;
@@ -19,6 +20,7 @@ pub mod voting;
 
 pub use boundary::Boundary;
 pub use config::SegConfig;
+pub use depth_regions::{DepthRegionParams, DepthRegions};
 pub use engine::{SegEngine, SegError};
 pub use file::SegFile;
 pub use input::FrameMap;
