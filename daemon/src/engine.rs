@@ -876,4 +876,21 @@ mod tests {
         file.certainty = None;
         assert_eq!(calibrated_floor(&config, &file), 0.0, "a file without a record leaves the term off");
     }
+
+    #[test]
+    fn depth_regrouping_is_on_by_default_with_each_objects_diameter() {
+        let spec = resolve(&shipped_config()).unwrap();
+        let (diameters, params) = spec.seg_depth_regions.expect("on by default");
+        assert_eq!(params, DepthRegionParams::default());
+        let objects = load_objects(&shipped_config()).unwrap();
+        assert_eq!(diameters.len(), objects.len());
+        for (d, o) in diameters.iter().zip(&objects.objects) {
+            assert!((*d as f64 - o.diameter).abs() < 1e-6, "{}: {d} vs {}", o.name, o.diameter);
+        }
+        let tuned = EstimatorConfig { seg_depth_regions: "share=0.5,absorb=0".into(), ..shipped_config() };
+        let (_, p) = resolve(&tuned).unwrap().seg_depth_regions.unwrap();
+        assert_eq!((p.min_majority_share, p.absorb_below_share), (0.5, 0.0));
+        let off = EstimatorConfig { seg_depth_regions: "off".into(), ..shipped_config() };
+        assert!(resolve(&off).unwrap().seg_depth_regions.is_none());
+    }
 }
