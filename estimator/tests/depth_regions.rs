@@ -99,80 +99,71 @@ fn params(spec: &str) -> DepthRegionParams {
     spec.parse().unwrap()
 }
 
-#[test]
-fn a_box_on_the_table_takes_its_majority_class_and_the_table_stays_background() {
+/// The scene's cells before and after regrouping with `diameters` and
+/// `spec`, which cells lie on the box, and how many changed.
+struct Regrouped {
+    before: Vec<u16>,
+    after: Vec<u16>,
+    on_box: Vec<bool>,
+    changed: usize,
+}
+
+fn regroup(diameters: &[f32], spec: &str, torn: bool) -> Regrouped {
     let depth = depth();
     let map = FrameMap::new(W, H, &SegConfig::new(2));
-    let (mut cells, on_box) = labels(&map);
-    let before = cells.clone();
-    assert!(before.iter().zip(&on_box).any(|(&c, &b)| b && c == 0) && before.contains(&2));
-    // Class 1 fits the box (a 17 cm square, 6 cm high).
-    // Absorbing wherever the class is a minority, whatever the segmenter's scores.
-    let mut regions = DepthRegions::new(&[0.3, 0.3], params("share=0.3,slack=1.3,absorb=0.5,absorb-p=0"));
-    let changed = regions.apply(&frame(&depth), &map, &logits(&before, false), &mut cells);
-    for (i, (&c, &b)) in cells.iter().zip(&on_box).enumerate() {
-        assert_eq!(c, if b { 1 } else { 0 }, "cell {i}");
+    let (before, on_box) = labels(&map);
+    let mut after = before.clone();
+    let changed =
+        DepthRegions::new(diameters, params(spec)).apply(&frame(&depth), &map, &logits(&before, torn), &mut after);
+    Regrouped { before, after, on_box, changed }
+}
+
+#[test]
+fn a_box_on_the_table_takes_its_majority_class_and_the_table_stays_background() {
+    // Class 1 fits the box (a 17 cm square, 6 cm high); absorbing wherever
+    // a class is a minority, whatever the segmenter's scores.
+    let r = regroup(&[0.3, 0.3], "share=0.3,slack=1.3,absorb=0.5,absorb-p=0", false);
+    assert!(r.before.iter().zip(&r.on_box).any(|(&c, &b)| b && c == 0) && r.before.contains(&2));
+    for (i, (&c, &b)) in r.after.iter().zip(&r.on_box).enumerate() {
+        assert_eq!(c, u16::from(b), "cell {i}");
     }
-    assert_eq!(changed, before.iter().zip(&on_box).filter(|&(&c, &b)| b && c != 1).count());
+    assert_eq!(r.changed, r.before.iter().zip(&r.on_box).filter(|&(&c, &b)| b && c != 1).count());
 }
 
 #[test]
 fn grow_only_keeps_the_other_class_and_fills_the_background_cells() {
-    let depth = depth();
-    let map = FrameMap::new(W, H, &SegConfig::new(2));
-    let (mut cells, on_box) = labels(&map);
-    let before = cells.clone();
-    let mut regions = DepthRegions::new(&[0.3, 0.3], params("share=0.3,slack=1.3,absorb=0"));
-    regions.apply(&frame(&depth), &map, &logits(&before, false), &mut cells);
-    for i in 0..cells.len() {
-        let want = match (on_box[i], before[i]) {
+    let r = regroup(&[0.3, 0.3], "share=0.3,slack=1.3,absorb=0", false);
+    for i in 0..r.after.len() {
+        let want = match (r.on_box[i], r.before[i]) {
             (false, _) => 0,
             (true, 2) => 2,
             (true, _) => 1,
         };
-        assert_eq!(cells[i], want, "cell {i}");
+        assert_eq!(r.after[i], want, "cell {i}");
     }
 }
 
 #[test]
 fn a_region_larger_than_its_class_is_left_as_labelled() {
-    let depth = depth();
-    let map = FrameMap::new(W, H, &SegConfig::new(2));
-    let (mut cells, _) = labels(&map);
-    let before = cells.clone();
     // Class 1 is a 5 cm object: the 17 cm box cannot be one.
-    let mut regions = DepthRegions::new(&[0.05, 0.3], params("share=0.3,slack=1.3,absorb=0.5"));
-    assert_eq!(regions.apply(&frame(&depth), &map, &logits(&before, false), &mut cells), 0);
-    assert_eq!(cells, before);
+    let r = regroup(&[0.05, 0.3], "share=0.3,slack=1.3,absorb=0.5", false);
+    assert_eq!(r.changed, 0);
+    assert_eq!(r.after, r.before);
 }
 
 #[test]
 fn only_cells_where_the_segmenter_was_torn_are_absorbed() {
-    let depth = depth();
-    let map = FrameMap::new(W, H, &SegConfig::new(2));
-    let (cells, on_box) = labels(&map);
-    let mut regions = DepthRegions::new(&[0.3, 0.3], params("share=0.3,slack=1.3,absorb=0.5,absorb-p=0.1"));
+    let spec = "share=0.3,slack=1.3,absorb=0.5,absorb-p=0.1";
     // Sure of class 2 (class 1 at 1.7 %): kept, while the background cells grow.
-    let mut sure = cells.clone();
-    regions.apply(&frame(&depth), &map, &logits(&cells, false), &mut sure);
-    for i in 0..cells.len() {
-        assert_eq!(
-            sure[i],
-            if cells[i] == 2 {
-                2
-            } else if on_box[i] {
-                1
-            } else {
-                0
-            },
-            "cell {i}"
-        );
+    let sure = regroup(&[0.3, 0.3], spec, false);
+    for i in 0..sure.after.len() {
+        let want = if sure.before[i] == 2 { 2 } else { u16::from(sure.on_box[i]) };
+        assert_eq!(sure.after[i], want, "cell {i}");
     }
     // Torn between 2 and 1 (class 1 at 37 %): absorbed.
-    let mut torn = cells.clone();
-    regions.apply(&frame(&depth), &map, &logits(&cells, true), &mut torn);
-    for i in 0..cells.len() {
-        assert_eq!(torn[i], u16::from(on_box[i]), "cell {i}");
+    let torn = regroup(&[0.3, 0.3], spec, true);
+    for i in 0..torn.after.len() {
+        assert_eq!(torn.after[i], u16::from(torn.on_box[i]), "cell {i}");
     }
 }
 
