@@ -18,9 +18,13 @@
 //! sample per cell; buffers are sized on the first frame of a grid size and
 //! never grown after that.
 
+use nalgebra::Vector3;
+
 use crate::frame::FrameView;
 use crate::parts::ClassExtents;
+use crate::sampling::back_project;
 
+use super::engine::softmax_terms;
 use super::input::FrameMap;
 
 /// Tunables of [`DepthRegions`].
@@ -123,7 +127,7 @@ pub struct DepthRegions {
     params: DepthRegionParams,
     extents: ClassExtents,
     /// Per cell: camera-frame point (metres), z = 0 where the cell has no depth.
-    points: Vec<[f32; 3]>,
+    points: Vec<Vector3<f32>>,
     /// Per cell: already in a component.
     seen: Vec<bool>,
     /// Cells of every component, component by component ([`Self::components`]).
@@ -158,7 +162,7 @@ impl DepthRegions {
 
     fn fit(&mut self, n: usize) {
         if self.points.len() != n {
-            self.points = vec![[0.0; 3]; n];
+            self.points = vec![Vector3::zeros(); n];
             self.seen = vec![false; n];
             self.members = Vec::with_capacity(n);
             self.bounds = Vec::with_capacity(n + 1);
@@ -184,28 +188,20 @@ impl DepthRegions {
 
     /// One depth sample per cell: the pixel at the cell's centre, back-projected.
     fn cell_points(&mut self, frame: &FrameView<'_>, map: &FrameMap, gw: usize, gh: usize) {
-        let k = &frame.intrinsics;
-        let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
         let width = frame.width();
         for y in 0..gh {
-            let sy = map.span_y(y);
-            let v = (sy.start + sy.end.saturating_sub(1)) / 2;
             for x in 0..gw {
-                let sx = map.span_x(x);
-                let u = (sx.start + sx.end.saturating_sub(1)) / 2;
+                let (u, v) = map.centre(x, y);
                 let z = frame.depth.metres(v * width + u).unwrap_or(0.0);
-                self.points[y * gw + x] = if z.is_finite() && z > 0.0 {
-                    [(u as f32 - cx) / fx * z, (v as f32 - cy) / fy * z, z]
-                } else {
-                    [0.0; 3]
-                };
+                self.points[y * gw + x] =
+                    if z.is_finite() && z > 0.0 { back_project(frame, u, v, z).into() } else { Vector3::zeros() };
             }
         }
     }
 
     /// The supporting plane `(n, d)` with `n·p + d` the height of p above it
     /// (positive on the camera's side), or `None` when the background has none.
-    fn plane(&mut self, cells: &[u16]) -> Option<([f32; 3], f32)> {
+    fn plane(&mut self, cells: &[u16]) -> Option<(Vector3<f32>, f32)> {
         self.background.clear();
         self.background
             .extend((0..cells.len() as u32).filter(|&i| cells[i as usize] == 0 && self.points[i as usize][2] > 0.0));
@@ -220,20 +216,19 @@ impl DepthRegions {
         };
         // Inliers are counted on every other background cell: the plane is large.
         let stride = if m > 2000 { 2 } else { 1 };
-        let mut best: Option<([f32; 3], f32, usize)> = None;
+        let mut best: Option<(Vector3<f32>, f32, usize)> = None;
         for _ in 0..PLANE_TRIES {
             let [a, b, c] = [next(m), next(m), next(m)].map(|i| self.points[self.background[i] as usize]);
-            let (u, v) = (sub(b, a), sub(c, a));
-            let nrm = cross(u, v);
-            let len = dot(nrm, nrm).sqrt();
+            let nrm = (b - a).cross(&(c - a));
+            let len = nrm.norm();
             if len.is_nan() || len <= 1e-9 {
                 continue;
             }
-            let mut nrm = nrm.map(|x| x / len);
-            let mut d = -dot(nrm, a);
+            let mut nrm = nrm / len;
+            let mut d = -nrm.dot(&a);
             // The camera (origin) is above the plane.
             if d < 0.0 {
-                nrm = nrm.map(|x| -x);
+                nrm = -nrm;
                 d = -d;
             }
             let inliers = self
@@ -242,7 +237,7 @@ impl DepthRegions {
                 .step_by(stride)
                 .filter(|&&i| {
                     let p = self.points[i as usize];
-                    (dot(nrm, p) + d).abs() <= PLANE_TOL_M + PLANE_TOL_PER_M * p[2]
+                    (nrm.dot(&p) + d).abs() <= PLANE_TOL_M + PLANE_TOL_PER_M * p.z
                 })
                 .count();
             if best.is_none_or(|(_, _, b)| inliers > b) {
@@ -255,15 +250,15 @@ impl DepthRegions {
 
     /// The components of the cells standing on the plane: their cells in
     /// `self.members`, component k at `self.bounds[k]..self.bounds[k + 1]`.
-    fn components(&mut self, plane: &([f32; 3], f32), gw: usize, gh: usize) {
+    fn components(&mut self, plane: &(Vector3<f32>, f32), gw: usize, gh: usize) {
         let (nrm, d) = *plane;
         let p = self.params;
-        let above = |q: [f32; 3]| q[2] > 0.0 && dot(nrm, q) + d > p.min_height_m;
+        let above = |q: &Vector3<f32>| q.z > 0.0 && nrm.dot(q) + d > p.min_height_m;
         self.seen.fill(false);
         self.members.clear();
         self.bounds.clear();
         for start in 0..gw * gh {
-            if self.seen[start] || !above(self.points[start]) {
+            if self.seen[start] || !above(&self.points[start]) {
                 continue;
             }
             self.bounds.push(self.members.len() as u32);
@@ -275,7 +270,7 @@ impl DepthRegions {
                 let i = self.members[next] as usize;
                 next += 1;
                 let (x, y) = (i % gw, i / gw);
-                let z = self.points[i][2];
+                let z = self.points[i].z;
                 let step = p.max_step_m + p.max_step_per_m * z;
                 let neighbours = [
                     (x > 0).then(|| i - 1),
@@ -284,8 +279,8 @@ impl DepthRegions {
                     (y + 1 < gh).then(|| i + gw),
                 ];
                 for j in neighbours.into_iter().flatten() {
-                    let q = self.points[j];
-                    if !self.seen[j] && above(q) && (q[2] - z).abs() <= step {
+                    let q = &self.points[j];
+                    if !self.seen[j] && above(q) && (q.z - z).abs() <= step {
                         self.seen[j] = true;
                         self.members.push(j as u32);
                     }
@@ -303,16 +298,14 @@ impl DepthRegions {
         for k in 0..self.bounds.len().saturating_sub(1) {
             let members = &self.members[self.bounds[k] as usize..self.bounds[k + 1] as usize];
             self.counts.fill(0);
-            let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
+            let (mut lo, mut hi) = (Vector3::repeat(f32::INFINITY), Vector3::repeat(f32::NEG_INFINITY));
             for &i in members {
                 let i = i as usize;
                 if let Some(c) = self.counts.get_mut(cells[i] as usize) {
                     *c += 1;
                 }
-                for (a, v) in self.points[i].iter().enumerate() {
-                    lo[a] = lo[a].min(*v);
-                    hi[a] = hi[a].max(*v);
-                }
+                lo = lo.inf(&self.points[i]);
+                hi = hi.sup(&self.points[i]);
             }
             let total = members.len() as u32;
             let labelled = total - self.counts[0];
@@ -325,7 +318,7 @@ impl DepthRegions {
             if most == 0 || (most as f32) < p.min_majority_share * total as f32 {
                 continue;
             }
-            let diagonal = dot(sub(hi, lo), sub(hi, lo)).sqrt();
+            let diagonal = (hi - lo).norm();
             let extent = self.extents.of(class as u16);
             if extent <= 0.0 || diagonal.is_nan() || diagonal > extent * p.extent_slack {
                 continue;
@@ -350,19 +343,6 @@ impl DepthRegions {
 /// Softmax probability of `class` in cell `i` of class-major `logits` (`[classes, n]`).
 fn probability(logits: &[f32], n: usize, classes: usize, i: usize, class: usize) -> f32 {
     let at = |c: usize| logits[c * n + i];
-    let max = (0..classes).map(at).fold(f32::NEG_INFINITY, f32::max);
-    let sum: f32 = (0..classes).map(|c| (at(c) - max).exp()).sum();
+    let (max, sum) = softmax_terms(classes, at);
     (at(class) - max).exp() / sum
-}
-
-fn sub(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
-}
-
-fn cross(a: [f32; 3], b: [f32; 3]) -> [f32; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn dot(a: [f32; 3], b: [f32; 3]) -> f32 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }

@@ -181,6 +181,15 @@ fn erode_boundaries(cells: &[u16], w: usize, out: &mut [u16]) {
 /// grid); a file with a larger grid gets NaN (not judged).
 const MAX_CELLS: usize = 160 * 120 + 64;
 
+/// A cell's softmax over `classes` logits (`logit(c)`): the largest logit
+/// and the sum of `exp(logit − largest)`, so that p(c) = exp(logit(c) −
+/// largest) / sum.
+pub(crate) fn softmax_terms(classes: usize, logit: impl Fn(usize) -> f32) -> (f32, f32) {
+    let max = (0..classes).map(&logit).fold(f32::NEG_INFINITY, f32::max);
+    let sum = (0..classes).map(|c| (logit(c) - max).exp()).sum();
+    (max, sum)
+}
+
 /// The segmenter inference engine.
 pub struct SegEngine {
     config: SegConfig,
@@ -584,8 +593,7 @@ impl SegEngine {
         let mut best = f32::NEG_INFINITY;
         let cells = self.for_region_cells(ids, id, bbox, |logit, cell| {
             // log softmax(class) = logit(class) − logsumexp(logits).
-            let max = (0..classes).map(|c| logit(c, cell)).fold(f32::NEG_INFINITY, f32::max);
-            let sum: f32 = (0..classes).map(|c| (logit(c, cell) - max).exp()).sum();
+            let (max, sum) = softmax_terms(classes, |c| logit(c, cell));
             best = best.max(logit(class as usize, cell) - max - sum.ln());
         });
         if cells == 0 { f32::NAN } else { best.exp() }
@@ -604,8 +612,7 @@ impl SegEngine {
             return 0;
         }
         let cells = self.for_region_cells(ids, id, bbox, |logit, cell| {
-            let max = (0..classes).map(|c| logit(c, cell)).fold(f32::NEG_INFINITY, f32::max);
-            let sum: f32 = (0..classes).map(|c| (logit(c, cell) - max).exp()).sum();
+            let (max, sum) = softmax_terms(classes, |c| logit(c, cell));
             for (c, m) in means.iter_mut().enumerate() {
                 *m += (logit(c, cell) - max).exp() / sum;
             }

@@ -227,12 +227,19 @@ impl FrameMap {
         }
     }
 
+    /// The centre pixel `(u, v)` of the frame pixels that upsample to cell `(cx, cy)`.
+    #[inline]
+    pub fn centre(&self, cx: usize, cy: usize) -> (usize, usize) {
+        (self.centre_x[cx] as usize, self.centre_y[cy] as usize)
+    }
+
     /// The training target: the frame label (`label_at(pixel index)`) at each
     /// output cell's centre pixel, into `out` (`out_h * out_w`).
     pub fn target(&self, label_at: impl Fn(usize) -> u16, out: &mut [u16]) {
-        for (cy, &v) in self.centre_y.iter().enumerate() {
-            for (cx, &u) in self.centre_x.iter().enumerate() {
-                out[cy * self.out_w + cx] = label_at(v as usize * self.width + u as usize);
+        for cy in 0..self.out_h {
+            for cx in 0..self.out_w {
+                let (u, v) = self.centre(cx, cy);
+                out[cy * self.out_w + cx] = label_at(v * self.width + u);
             }
         }
     }
