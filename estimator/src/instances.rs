@@ -255,6 +255,12 @@ impl InstanceFinder {
         true
     }
 
+    /// The id [`split`](Self::split) gives its piece 1 next (piece k gets
+    /// this + k − 1).
+    pub fn next_split_id(&self) -> u32 {
+        self.next_id
+    }
+
     /// Splits kept component `id` into pieces: `piece_of(pixel index)` names
     /// the piece (0..[`MAX_PIECES`]) of each of its pixels, or `None` for a
     /// pixel that leaves the component (it becomes background). Piece 0 keeps the

@@ -20,6 +20,7 @@ pub mod interpenetration;
 pub mod net;
 pub mod parts;
 pub mod poses;
+pub mod recut;
 pub mod resident;
 pub mod sampling;
 pub mod seg;

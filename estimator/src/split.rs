@@ -376,7 +376,12 @@ enum Seeding {
 /// k-means ([`ITERATIONS`] Lloyd steps) from each [`Seeding`], keeping the
 /// one with the lower sum of squared distances; fills `cluster` and returns
 /// the centres (entries past k are zero).
-fn kmeans(points: &[[f32; 3]], k: usize, cluster: &mut [u8], order: &mut Vec<(f32, u8)>) -> [[f32; 3]; MAX_PIECES] {
+pub(crate) fn kmeans(
+    points: &[[f32; 3]],
+    k: usize,
+    cluster: &mut [u8],
+    order: &mut Vec<(f32, u8)>,
+) -> [[f32; 3]; MAX_PIECES] {
     let n = points.len() as f32;
     let mean = points.iter().fold([0.0f32; 3], |a, p| [a[0] + p[0] / n, a[1] + p[1] / n, a[2] + p[2] / n]);
     let mut best = ([[0.0f32; 3]; MAX_PIECES], f32::INFINITY);
@@ -478,18 +483,18 @@ fn dist2(a: &[f32; 3], b: &[f32; 3]) -> f32 {
 }
 
 /// Index of the centre nearest to `p` (0 when there are none).
-fn nearest(centres: &[[f32; 3]], p: [f32; 3]) -> usize {
+pub(crate) fn nearest(centres: &[[f32; 3]], p: [f32; 3]) -> usize {
     (0..centres.len()).min_by(|&a, &b| dist2(&centres[a], &p).total_cmp(&dist2(&centres[b], &p))).unwrap_or(0)
 }
 
 /// Index of the projected centre nearest to pixel `uv`.
-fn nearest_2d(pixels: &[[f32; 2]], uv: [f32; 2]) -> usize {
+pub(crate) fn nearest_2d(pixels: &[[f32; 2]], uv: [f32; 2]) -> usize {
     let d = |c: &[f32; 2]| (c[0] - uv[0]).powi(2) + (c[1] - uv[1]).powi(2);
     (0..pixels.len()).min_by(|&a, &b| d(&pixels[a]).total_cmp(&d(&pixels[b]))).unwrap_or(0)
 }
 
 /// Pixel of a camera-frame point (the origin's pixel for none or z ≤ 0).
-fn project(frame: &FrameView<'_>, p: Option<&[f32; 3]>) -> [f32; 2] {
+pub(crate) fn project(frame: &FrameView<'_>, p: Option<&[f32; 3]>) -> [f32; 2] {
     let k = &frame.intrinsics;
     match p {
         Some(p) if p[2] > 0.0 => {

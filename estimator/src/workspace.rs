@@ -230,6 +230,73 @@ impl Workspace {
         self.splitter = (!limits.extents.is_empty()).then(|| RegionSplitter::new(limits, self.config.max_instances));
     }
 
+    /// Cuts instance `i`'s region in two after its estimate
+    /// ([`crate::recut`]): `piece_of(pixel index)` is 0 for the pixels that
+    /// stay with instance `i` and 1 for those that become a new instance,
+    /// appended last. Returns the new instance's index, or `None`, changing
+    /// nothing, when `i` has no region, the instance list or the region list
+    /// is full, or a piece would be empty. The new instance's rows of
+    /// `points`, `crops` and `choose` are not filled: it is for the steps
+    /// after the estimate (verification, masks, the published box). No
+    /// allocation.
+    pub fn cut_instance(
+        &mut self,
+        frame: &FrameView<'_>,
+        i: usize,
+        mut piece_of: impl FnMut(usize) -> usize,
+    ) -> Option<usize> {
+        let id = self.component_id(i)?;
+        let max = self.config.max_instances;
+        if self.instances.len() >= max || self.finder.components().len() >= max {
+            return None;
+        }
+        let inst = self.instances[i];
+        let w = frame.width();
+        let ids = self.finder.component_ids();
+        let [u0, v0, u1, v1] = inst.bbox.map(|x| x as usize);
+        let mut counts = [0usize; 2];
+        for v in v0..=v1 {
+            for u in u0..=u1 {
+                let p = v * w + u;
+                if ids.get(p) == Some(&id) {
+                    counts[piece_of(p).min(1)] += 1;
+                }
+            }
+        }
+        if counts.contains(&0) {
+            return None;
+        }
+        let new_id = self.finder.next_split_id();
+        let limits = InstanceLimits { min_pixels: 1, max_instances: max, num_classes: self.config.num_classes };
+        if self.finder.split(id, limits, |p| Some(piece_of(p).min(1))) != 1 {
+            return None;
+        }
+        let h = frame.height();
+        let margin = self.config.crop_margin;
+        let ids = self.finder.component_ids();
+        let instance = |c: Component| {
+            let [u0, v0, u1, v1] = c.bbox.map(|x| x as usize);
+            let valid = (v0..=v1)
+                .flat_map(|v| (u0..=u1).map(move |u| v * w + u))
+                .filter(|&p| ids[p] == c.component_id && frame.depth.metres(p).is_some())
+                .count();
+            Instance {
+                class_id: c.class_id,
+                pixels: c.pixels,
+                valid_depth_pixels: valid as u32,
+                bbox: c.bbox,
+                crop_window: sampling::crop_window(c.bbox, margin, w, h),
+                alt_class_id: 0,
+            }
+        };
+        let find = |want: u32| self.finder.components().iter().copied().find(|c| c.component_id == want);
+        let (Some(kept), Some(new)) = (find(id), find(new_id)) else { return None };
+        let (kept, new) = (instance(kept), instance(new));
+        self.instances[i] = Instance { alt_class_id: inst.alt_class_id, ..kept };
+        self.instances.push(new);
+        Some(self.instances.len() - 1)
+    }
+
     /// What the last [`prepare`](Self::prepare) skipped.
     pub fn stats(&self) -> PrepareStats {
         self.stats

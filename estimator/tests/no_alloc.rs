@@ -10,7 +10,7 @@ mod common;
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
 
-use common::{l_block, object_set, render, step_block};
+use common::{l_block, object_set, painted, render, step_block};
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
 use fusepose_estimator::{Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
@@ -118,17 +118,6 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
             }
         }
     }
-}
-
-/// Every labelled pixel one colour (the synthetic frames' colours follow the
-/// pixel position, which would make two copies look like two objects).
-fn painted(mut frame: common::SyntheticFrame) -> common::SyntheticFrame {
-    for (p, &l) in frame.labels.iter().enumerate() {
-        if l != 0 {
-            frame.color[p * 3..p * 3 + 3].copy_from_slice(&[150, 110, 60]);
-        }
-    }
-    frame
 }
 
 /// Clears the labels of a 3-pixel-wide column through the middle of the

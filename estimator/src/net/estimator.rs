@@ -603,6 +603,13 @@ impl NetEstimator {
         }
     }
 
+    /// A [`sibling`](Self::sibling) that never tracks: for instances that
+    /// are not the camera's objects from frame to frame (the pieces of
+    /// [`crate::recut`]), whose tracks would replace the camera's.
+    pub fn untracked_sibling(&self) -> Self {
+        Self { tracks: None, fit: None, ..self.sibling() }
+    }
+
     /// The weight file (config, objects, training record).
     pub fn weights(&self) -> &WeightFile {
         &self.file

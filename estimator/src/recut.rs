@@ -1,0 +1,428 @@
+//! A second look at regions their pose leaves unexplained: two copies side
+//! by side that passed as one object.
+//!
+//! The cut in [`crate::split`] runs before any pose and judges a region by
+//! its size alone, so two cans or two boxes side by side along their thin
+//! side pass as one object (they fit inside one copy's diameter and largest
+//! silhouette) and get one pose between them. That pose then covers only
+//! part of its region: on the tuning splits a region of one copy has its
+//! verification coverage ([`Verification::mask_coverage`]) at 0.94 or more
+//! in 9 cases of 10, one of two or more copies at a median of 0.76
+//! (docs/BENCHMARKS.md, session 24).
+//!
+//! So after verification, each region whose pose covers less than
+//! [`RecutConfig::max_coverage`] of it is cut in two (k-means on its 3D
+//! points), each piece is estimated on its own as an instance, and the depth
+//! image decides: the cut stays when both pieces' poses pass verification
+//! and lie apart as two copies must ([`RecutConfig::min_separation`] × the
+//! object's smallest side). The parts of one object, cut, vote for one
+//! centre (the network's per-point translations point at the object's
+//! centre from any part of it); two copies vote for two.
+//!
+//! Class planes only: an instance plane's instances are the producer's.
+//! Buffers are sized in [`Recut::new`] and on the first frame of a size;
+//! a frame then allocates nothing.
+
+use fusepose_scene::ObjectSet;
+
+use crate::frame::{FrameView, LabelPlane};
+use crate::poses::{ObjectPose, PoseSet};
+use crate::seg::SegEngine;
+use crate::split::{kmeans, nearest, nearest_2d, project};
+use crate::verify::{MaskRef, Verification, Verifier};
+use crate::workspace::{Workspace, WorkspaceConfig, WorkspaceConfigError};
+use crate::{EstimateError, Estimator};
+
+/// Points per region the cut clusters.
+const SAMPLES: usize = 128;
+/// Fewest valid-depth pixels of a region worth cutting.
+const MIN_POINTS: usize = 64;
+/// Each piece must hold at least this share of the region's samples: a
+/// sliver is what the mask bled onto, not a copy.
+const MIN_PIECE_SHARE: f32 = 0.2;
+
+/// When a region is looked at again, and what its cut must show.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct RecutConfig {
+    /// Regions whose pose's verification coverage is below this are cut and
+    /// estimated again (0 = off).
+    pub max_coverage: f32,
+    /// The pieces' poses must be at least this × the object's smallest
+    /// bounding-box side apart to be two copies.
+    pub min_separation: f32,
+    /// Neither piece's pose may explain this share or more of the other
+    /// piece's mask ([`Verifier::explained_share`]): the pose of one half of
+    /// a single object covers its other half too.
+    pub max_cross_explained: f32,
+    /// The pieces' solids may overlap by at most this share of either
+    /// ([`crate::interpenetration::Solids::share_inside`]): two copies cannot
+    /// share space, where the two poses of one object cut in two do.
+    pub max_overlap: f32,
+    /// Most regions looked at per frame (the lowest coverage first).
+    pub max_regions: usize,
+}
+
+impl RecutConfig {
+    /// The daemon's and `fusepose eval`'s default.
+    pub const DEFAULT: Self =
+        Self { max_coverage: 0.85, min_separation: 0.5, max_cross_explained: 0.5, max_overlap: 0.15, max_regions: 2 };
+
+    pub fn is_on(&self) -> bool {
+        self.max_coverage > 0.0 && self.max_regions > 0
+    }
+}
+
+/// What one frame's second look did.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub struct RecutStats {
+    /// Regions cut and estimated again.
+    pub tried: usize,
+    /// Of them, regions whose cut stayed (each now two instances).
+    pub kept: usize,
+}
+
+/// A region chosen for a second look.
+#[derive(Clone, Copy, Debug)]
+struct Candidate {
+    /// Index of the region's pose in the frame's poses.
+    pose: usize,
+    coverage: f32,
+}
+
+/// Cuts, estimates and judges regions again; see the module doc.
+pub struct Recut {
+    config: RecutConfig,
+    /// Two copies cannot share space: the pieces' poses must not overlap.
+    solids: std::sync::Arc<crate::interpenetration::Solids>,
+    /// Per class (id − 1): the smallest bounding-box side, metres.
+    sides: Vec<f32>,
+    /// The pieces as an instance plane: piece ids 2j + 1 and 2j + 2 for
+    /// candidate j, 0 elsewhere.
+    ids: Vec<u16>,
+    classes: Vec<u16>,
+    /// Boxes written into `ids` this frame (cleared on the next).
+    written: Vec<[u16; 4]>,
+    ws: Workspace,
+    poses: PoseSet,
+    verdicts: Vec<Verification>,
+    candidates: Vec<Candidate>,
+    samples: Vec<[f32; 3]>,
+    cluster: Vec<u8>,
+    order: Vec<(f32, u8)>,
+    /// Per candidate: its two centres (k-means), camera frame.
+    centres: Vec<[[f32; 3]; 2]>,
+    marks: Vec<bool>,
+    /// [`Recut::limit_next_frame`]'s cap, for the next frame only.
+    frame_limit: Option<usize>,
+}
+
+impl Recut {
+    /// For the estimator's workspace sizes `ws_config` (the pieces are
+    /// prepared as its instances).
+    pub fn new(
+        objects: &ObjectSet,
+        solids: std::sync::Arc<crate::interpenetration::Solids>,
+        ws_config: WorkspaceConfig,
+        config: RecutConfig,
+    ) -> Result<Self, WorkspaceConfigError> {
+        let regions = config.max_regions.max(1);
+        let ws = Workspace::new(WorkspaceConfig { max_instances: 2 * regions, ..ws_config })?;
+        Ok(Self {
+            config,
+            solids,
+            sides: objects.objects.iter().map(|o| (o.bbox_max - o.bbox_min).min() as f32).collect(),
+            ids: Vec::new(),
+            classes: vec![0; 2 * regions + 1],
+            written: Vec::with_capacity(regions),
+            ws,
+            poses: PoseSet::with_capacity(4 * regions),
+            verdicts: Vec::with_capacity(4 * regions),
+            candidates: Vec::with_capacity(ws_config.max_instances.max(regions)),
+            samples: Vec::with_capacity(SAMPLES),
+            cluster: vec![0; SAMPLES],
+            order: Vec::with_capacity(SAMPLES),
+            centres: Vec::with_capacity(regions),
+            marks: Vec::with_capacity(4 * ws_config.max_instances),
+            frame_limit: None,
+        })
+    }
+
+    pub fn config(&self) -> &RecutConfig {
+        &self.config
+    }
+
+    /// Looks at no more than `regions` regions in the next [`Recut::run`]
+    /// only: what the frame's time left pays for (the daemon).
+    pub fn limit_next_frame(&mut self, regions: usize) {
+        self.frame_limit = Some(regions);
+    }
+
+    /// Looks again at the regions of `ws` whose pose in `poses` covers less
+    /// than `max_coverage` of them; `verdicts` is the verification of each
+    /// pose (same order, at most one pose per instance: after class
+    /// alternates are settled). Where a cut stays, the region's pose is
+    /// replaced by its pieces' poses (with their verdicts, appended) and
+    /// `ws` holds the pieces as two instances. `segmenter`: the built-in
+    /// segmenter when it made the regions (its certainty is judged on the
+    /// pieces as on any region). `estimator` estimates the pieces; it should
+    /// not be one that tracks objects across frames (its tracks would see
+    /// only the pieces).
+    #[allow(clippy::too_many_arguments)] // the frame's parts, borrowed one by one
+    pub fn run(
+        &mut self,
+        frame: &FrameView<'_>,
+        ws: &mut Workspace,
+        poses: &mut PoseSet,
+        verdicts: &mut Vec<Verification>,
+        estimator: &mut dyn Estimator,
+        verifier: &mut Verifier,
+        segmenter: Option<&SegEngine>,
+        seed: u64,
+    ) -> Result<RecutStats, EstimateError> {
+        let mut stats = RecutStats::default();
+        let class_plane = frame.labels.is_some_and(|l| !l.is_instances());
+        if !class_plane || !self.config.is_on() || verdicts.len() != poses.len() {
+            return Ok(stats);
+        }
+        self.choose(poses.as_slice(), verdicts);
+        if self.candidates.is_empty() {
+            return Ok(stats);
+        }
+        self.cut(frame, ws, poses.as_slice());
+        stats.tried = self.centres.len();
+        if stats.tried == 0 {
+            return Ok(stats);
+        }
+        // Out of `self` while the view borrows them (no allocation).
+        let (ids, classes) = (std::mem::take(&mut self.ids), std::mem::take(&mut self.classes));
+        let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..*frame };
+        let estimated = self
+            .ws
+            .prepare(&view, seed)
+            .map_err(EstimateError::Frame)
+            .and_then(|_| estimator.estimate(&view, &mut self.ws, &mut self.poses));
+        if estimated.is_ok() {
+            self.verify(&view, verifier, segmenter);
+            stats.kept = self.apply(frame, &view, verifier, &ids, ws, poses, verdicts);
+        }
+        (self.ids, self.classes) = (ids, classes);
+        estimated?;
+        Ok(stats)
+    }
+
+    /// The regions to look at, lowest coverage first.
+    fn choose(&mut self, poses: &[ObjectPose], verdicts: &[Verification]) {
+        self.candidates.clear();
+        for (k, v) in verdicts.iter().enumerate() {
+            let coverage = v.mask_coverage;
+            // Only a pose the depth supports is worth a second look: a region
+            // whose pose failed is more often another object taken for this
+            // class, and its pieces' poses fit a small model anywhere.
+            if v.passed && coverage < self.config.max_coverage && poses[k].class_id as usize <= self.sides.len() {
+                self.candidates.push(Candidate { pose: k, coverage });
+            }
+        }
+        self.candidates.sort_unstable_by(|a, b| a.coverage.total_cmp(&b.coverage));
+        self.candidates.truncate(self.config.max_regions.min(self.frame_limit.take().unwrap_or(usize::MAX)));
+    }
+
+    /// Writes the candidates' pieces into the instance plane: k-means in 3D
+    /// over up to [`SAMPLES`] of the region's valid-depth points, every
+    /// pixel to its nearest centre (by image distance to the projected
+    /// centres where it has no depth). Candidates whose pieces are too
+    /// uneven are dropped.
+    fn cut(&mut self, frame: &FrameView<'_>, ws: &Workspace, poses: &[ObjectPose]) {
+        let (w, h) = (frame.width(), frame.height());
+        if self.ids.len() != w * h {
+            self.ids.clear();
+            self.ids.resize(w * h, 0);
+            self.written.clear();
+        }
+        for b in self.written.drain(..) {
+            let [u0, v0, u1, v1] = b.map(|x| x as usize);
+            for v in v0..=v1.min(h.saturating_sub(1)) {
+                self.ids[v * w + u0.min(w)..v * w + (u1 + 1).min(w)].fill(0);
+            }
+        }
+        self.classes.fill(0);
+        self.centres.clear();
+        let all = ws.component_ids();
+        let mut kept = 0;
+        for c in 0..self.candidates.len() {
+            let pose = poses[self.candidates[c].pose];
+            let Some(id) = ws.component_id(pose.instance_id as usize) else { continue };
+            let bbox = ws.instances[pose.instance_id as usize].bbox;
+            let [u0, v0, u1, v1] = bbox.map(|x| x as usize);
+            let in_region = |p: usize| all.get(p) == Some(&id);
+            let valid = (v0..=v1)
+                .flat_map(|v| (u0..=u1).map(move |u| v * w + u))
+                .filter(|&p| in_region(p) && frame.depth.metres(p).is_some())
+                .count();
+            if valid < MIN_POINTS {
+                continue;
+            }
+            let stride = valid.div_ceil(SAMPLES).max(1);
+            self.samples.clear();
+            let points = (v0..=v1)
+                .flat_map(|v| (u0..=u1).map(move |u| (u, v)))
+                .filter_map(|(u, v)| {
+                    let p = v * w + u;
+                    frame
+                        .depth
+                        .metres(p)
+                        .filter(|_| in_region(p))
+                        .map(|z| crate::sampling::back_project(frame, u, v, z))
+                })
+                .step_by(stride)
+                .take(SAMPLES);
+            self.samples.extend(points);
+            let n = self.samples.len();
+            let centres = kmeans(&self.samples, 2, &mut self.cluster[..n], &mut self.order);
+            let ones = self.cluster[..n].iter().filter(|&&x| x == 1).count();
+            let min = (MIN_PIECE_SHARE * n as f32).ceil() as usize;
+            if ones < min || n - ones < min {
+                continue;
+            }
+            let centres = [centres[0], centres[1]];
+            let pixels = [project(frame, Some(&centres[0])), project(frame, Some(&centres[1]))];
+            let base = 2 * kept as u16;
+            for v in v0..=v1 {
+                for u in u0..=u1 {
+                    let p = v * w + u;
+                    if !in_region(p) {
+                        continue;
+                    }
+                    let piece = match frame.depth.metres(p) {
+                        Some(z) => nearest(&centres, crate::sampling::back_project(frame, u, v, z)),
+                        None => nearest_2d(&pixels, [u as f32, v as f32]),
+                    };
+                    self.ids[p] = base + 1 + piece as u16;
+                }
+            }
+            self.classes[base as usize + 1] = pose.class_id;
+            self.classes[base as usize + 2] = pose.class_id;
+            self.written.push(bbox);
+            self.candidates[kept] = self.candidates[c];
+            self.centres.push(centres);
+            kept += 1;
+        }
+        self.candidates.truncate(kept);
+    }
+
+    /// Verifies each piece's pose on its piece's mask.
+    fn verify(&mut self, view: &FrameView<'_>, verifier: &mut Verifier, segmenter: Option<&SegEngine>) {
+        self.verdicts.clear();
+        let min_region_probability = verifier.config().min_region_probability;
+        for pose in self.poses.as_slice() {
+            let v = match self.ws.component_id(pose.instance_id as usize) {
+                Some(id) => {
+                    let mask = MaskRef { ids: self.ws.component_ids(), id, bbox: pose.bbox };
+                    let mut v = verifier.verify(view, mask, pose);
+                    if let Some(seg) = segmenter.filter(|_| min_region_probability > 0.0) {
+                        v.judge_region_probability(
+                            seg.region_probability(mask.ids, id, pose.class_id, pose.bbox),
+                            min_region_probability,
+                        );
+                    }
+                    v
+                }
+                None => Verification { passed: false, ..Verification::default() },
+            };
+            self.verdicts.push(v);
+        }
+    }
+
+    /// The pose (index in `self.poses`) of candidate `j`'s piece `k`.
+    fn piece_pose(&self, j: usize, k: usize) -> Option<usize> {
+        let want = (2 * j + 1 + k) as u32;
+        self.poses.as_slice().iter().position(|p| self.ws.component_id(p.instance_id as usize) == Some(want))
+    }
+
+    /// Whether candidate `j`'s pieces are two copies by the depth image and
+    /// by their poses: see [`RecutConfig`] for each term.
+    fn two_copies(&mut self, j: usize, view: &FrameView<'_>, verifier: &mut Verifier) -> bool {
+        let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { return false };
+        let (pa, pb) = (self.poses.as_slice()[a], self.poses.as_slice()[b]);
+        if !(self.verdicts[a].passed && self.verdicts[b].passed) {
+            return false;
+        }
+        let side = self.sides.get(pa.class_id as usize - 1).copied().unwrap_or(0.0);
+        if (pa.translation - pb.translation).norm() < (self.config.min_separation * side) as f64 {
+            return false;
+        }
+        let mask = |piece: usize, bbox: [u16; 4]| MaskRef {
+            ids: self.ws.component_ids(),
+            id: (2 * j + 1 + piece) as u32,
+            bbox,
+        };
+        let explained = verifier.explained_share(view, mask(1, pb.bbox), &pa).max(verifier.explained_share(
+            view,
+            mask(0, pa.bbox),
+            &pb,
+        ));
+        if explained >= self.config.max_cross_explained {
+            return false;
+        }
+        let iso =
+            |p: &ObjectPose| nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(p.translation), p.rotation);
+        let (ia, ib) = (iso(&pa), iso(&pb));
+        let overlap = self.solids.share_inside(pa.class_id, &ia, pb.class_id, &ib).max(self.solids.share_inside(
+            pb.class_id,
+            &ib,
+            pa.class_id,
+            &ia,
+        ));
+        overlap <= self.config.max_overlap
+    }
+
+    /// Keeps the cuts the depth image supports; returns how many.
+    #[allow(clippy::too_many_arguments)]
+    fn apply(
+        &mut self,
+        frame: &FrameView<'_>,
+        view: &FrameView<'_>,
+        verifier: &mut Verifier,
+        ids: &[u16],
+        ws: &mut Workspace,
+        poses: &mut PoseSet,
+        verdicts: &mut Vec<Verification>,
+    ) -> usize {
+        self.marks.clear();
+        self.marks.resize(poses.len(), false);
+        let mut kept = 0;
+        for j in 0..self.candidates.len() {
+            let whole = self.candidates[j].pose;
+            if !self.two_copies(j, view, verifier) {
+                continue;
+            }
+            let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { continue };
+            let (pa, pb) = (self.poses.as_slice()[a], self.poses.as_slice()[b]);
+            let (va, vb) = (self.verdicts[a], self.verdicts[b]);
+            // Room for both pieces' poses (the region's goes after the loop).
+            if poses.len() + 2 > poses.capacity() {
+                continue;
+            }
+            let i = poses.as_slice()[whole].instance_id as usize;
+            let base = 2 * j as u16 + 1;
+            let Some(new) = ws.cut_instance(frame, i, |p| ids[p].saturating_sub(base) as usize) else { continue };
+            let placed = |pose: ObjectPose, at: usize| {
+                let inst = ws.instances[at];
+                ObjectPose { instance_id: at as u16, bbox: inst.bbox, mask_pixels: inst.pixels, ..pose }
+            };
+            // Piece 0 keeps the region's instance index, piece 1 is the new one.
+            poses.push(placed(pb, new));
+            verdicts.push(vb);
+            self.marks.push(false);
+            self.marks[whole] = true;
+            poses.push(placed(pa, i));
+            verdicts.push(va);
+            self.marks.push(false);
+            kept += 1;
+        }
+        if kept > 0 {
+            poses.remove_marked(&self.marks);
+            crate::poses::remove_marked(verdicts, &self.marks);
+        }
+        kept
+    }
+}

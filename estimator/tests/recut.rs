@@ -1,0 +1,193 @@
+//! The second look (`fusepose_estimator::recut`): two touching copies of one
+//! object in one class region, which the size-based cut leaves whole, get a
+//! pose each once the region's single pose is found to cover only part of
+//! it; one object alone keeps its one pose, and each of the terms that tell
+//! one object's halves from two copies refuses its cut on its own; instance
+//! planes are never cut.
+
+mod common;
+
+use std::sync::Arc;
+
+use common::{BoxObject, SyntheticFrame, l_block, object_set, painted, render};
+use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
+use fusepose_estimator::interpenetration::Solids;
+use fusepose_estimator::recut::{Recut, RecutConfig, RecutStats};
+use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
+use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_scene::Pose;
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+fn pose(deg: f64, t: [f64; 3]) -> Pose {
+    let r = UnitQuaternion::from_scaled_axis(Vector3::z() * deg.to_radians());
+    Pose::from_parts(Translation3::new(t[0], t[1], t[2]), r)
+}
+
+/// Two L blocks side by side, touching, painted alike: one class-1 region.
+fn pair(l: &BoxObject) -> SyntheticFrame {
+    painted(render(&[(1, l, pose(10.0, [-0.04, 0.0, 0.5])), (1, l, pose(10.0, [0.04, 0.0, 0.5]))]))
+}
+
+struct Outcome {
+    poses: PoseSet,
+    verdicts: Vec<Verification>,
+    stats: RecutStats,
+    ws: Workspace,
+    before: usize,
+}
+
+/// Prepares (no size-based cut), estimates with ICP, verifies, then runs the
+/// second look with ICP for the pieces.
+fn second_look(view: &FrameView<'_>, config: RecutConfig) -> Outcome {
+    let objects = object_set(&[l_block()]);
+    second_look_with(view, config, &mut IcpEstimator::new(&objects, IcpConfig::default()).unwrap())
+}
+
+/// As [`second_look`], with `estimator` for the first estimate and the pieces.
+fn second_look_with(view: &FrameView<'_>, config: RecutConfig, estimator: &mut dyn Estimator) -> Outcome {
+    let objects = object_set(&[l_block()]);
+    let ws_config = WorkspaceConfig { num_classes: 1, ..Default::default() };
+    let mut ws = Workspace::new(ws_config).unwrap();
+    let mut poses = PoseSet::with_capacity(2 * ws_config.max_instances);
+    ws.prepare(view, 7).unwrap();
+    estimator.estimate(view, &mut ws, &mut poses).unwrap();
+    let mut verifier = Verifier::new(&objects, VerifyConfig::default());
+    let mut verdicts: Vec<Verification> = poses
+        .as_slice()
+        .iter()
+        .map(|p| {
+            let id = ws.component_id(p.instance_id as usize).unwrap();
+            verifier.verify(view, MaskRef { ids: ws.component_ids(), id, bbox: p.bbox }, p)
+        })
+        .collect();
+    let before = poses.len();
+    let mut recut = Recut::new(&objects, Arc::new(Solids::new(&objects)), ws_config, config).unwrap();
+    let stats = recut.run(view, &mut ws, &mut poses, &mut verdicts, estimator, &mut verifier, None, 7).unwrap();
+    Outcome { poses, verdicts, stats, ws, before }
+}
+
+#[test]
+fn two_touching_copies_in_one_region_get_a_pose_each() {
+    let l = l_block();
+    let frame = pair(&l);
+    let out = second_look(&frame.view(), RecutConfig::DEFAULT);
+    assert_eq!(out.before, 1, "one region, one pose before the second look");
+    assert_eq!((out.stats.tried, out.stats.kept), (1, 1), "the region is cut and the cut kept");
+    assert_eq!(out.poses.len(), 2);
+    assert_eq!(out.verdicts.len(), 2, "a verdict per pose, in step");
+    assert!(out.verdicts.iter().all(|v| v.passed));
+    assert_eq!(out.ws.instances.len(), 2, "the workspace holds the two pieces");
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    for (x, truth) in xs.iter().zip([-0.04, 0.04]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
+    for p in out.poses.as_slice() {
+        // Each pose's published box and mask are its own piece's.
+        let inst = out.ws.instances[p.instance_id as usize];
+        assert_eq!((p.bbox, p.mask_pixels), (inst.bbox, inst.pixels));
+        let centre_u = (inst.bbox[0] + inst.bbox[2]) as f64 / 2.0;
+        let k = frame.intrinsics;
+        assert_eq!(centre_u < k.cx, p.translation.x < 0.0, "pose and mask on the same side");
+    }
+}
+
+#[test]
+fn one_object_keeps_one_pose() {
+    let l = l_block();
+    let frame = painted(render(&[(1, &l, pose(10.0, [0.0, 0.0, 0.5]))]));
+    let out = second_look(&frame.view(), RecutConfig::DEFAULT);
+    assert_eq!((out.before, out.poses.len(), out.stats.kept), (1, 1, 0));
+    assert_eq!(out.ws.instances.len(), 1);
+}
+
+/// Poses every instance at the true pose nearest its points: the network's
+/// behaviour on a piece of one object (its points vote for that object's
+/// centre), without ICP's own errors on half a block.
+struct Oracle(Vec<Pose>);
+
+impl Estimator for Oracle {
+    fn name(&self) -> &str {
+        "oracle"
+    }
+
+    fn estimate(
+        &mut self,
+        _frame: &FrameView<'_>,
+        ws: &mut Workspace,
+        out: &mut PoseSet,
+    ) -> Result<(), fusepose_estimator::EstimateError> {
+        out.clear();
+        for (i, inst) in ws.instances.iter().enumerate() {
+            let points = &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)];
+            let n = points.len() as f64;
+            let c = points
+                .iter()
+                .fold(Vector3::zeros(), |a, p| a + Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64) / n);
+            let truth = self
+                .0
+                .iter()
+                .min_by(|a, b| (a.translation.vector - c).norm().total_cmp(&(b.translation.vector - c).norm()));
+            let truth = truth.unwrap();
+            out.push(ObjectPose {
+                class_id: inst.class_id,
+                instance_id: i as u16,
+                rotation: truth.rotation,
+                translation: truth.translation.vector,
+                confidence: 1.0,
+                mask_pixels: inst.pixels,
+                bbox: inst.bbox,
+                iterations: 0,
+            });
+        }
+        Ok(())
+    }
+}
+
+#[test]
+fn one_object_cut_in_two_is_kept_whole_by_each_two_copy_term() {
+    // Coverage forced above any pose's so the second look runs; the pieces of
+    // one block both get its true pose, which passes verification on each.
+    let l = l_block();
+    let truth = pose(10.0, [0.0, 0.0, 0.5]);
+    let frame = painted(render(&[(1, &l, truth)]));
+    let view = frame.view();
+    let looked = RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT };
+    let all_off = RecutConfig { min_separation: 0.0, max_cross_explained: 9.0, max_overlap: 9.0, ..looked };
+    let run = |config| second_look_with(&view, config, &mut Oracle(vec![truth]));
+    // Each term alone refuses the cut; with none of them it would stand.
+    assert_eq!(run(all_off).stats.kept, 1, "without the terms, one block becomes two poses");
+    for (term, config) in [
+        ("separation", RecutConfig { min_separation: looked.min_separation, ..all_off }),
+        ("cross-explanation", RecutConfig { max_cross_explained: looked.max_cross_explained, ..all_off }),
+        ("overlap", RecutConfig { max_overlap: looked.max_overlap, ..all_off }),
+        ("all", looked),
+    ] {
+        let out = run(config);
+        assert_eq!(out.stats.tried, 1, "{term}: the region was looked at again");
+        assert_eq!((out.poses.len(), out.stats.kept), (1, 0), "{term}: its halves are one object");
+    }
+}
+
+#[test]
+fn two_copies_posed_exactly_pass_every_term() {
+    let l = l_block();
+    let truths = vec![pose(10.0, [-0.04, 0.0, 0.5]), pose(10.0, [0.04, 0.0, 0.5])];
+    let frame = pair(&l);
+    let looked = RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT };
+    let out = second_look_with(&frame.view(), looked, &mut Oracle(truths));
+    assert_eq!((out.before, out.poses.len(), out.stats.kept), (1, 2, 1));
+}
+
+#[test]
+fn instance_planes_and_the_off_setting_are_left_alone() {
+    let l = l_block();
+    let frame = pair(&l);
+    let off = second_look(&frame.view(), RecutConfig { max_coverage: 0.0, ..RecutConfig::DEFAULT });
+    assert_eq!((off.poses.len(), off.stats.tried), (1, 0));
+    let ids: Vec<u16> = frame.labels.iter().map(|&l| l as u16).collect();
+    let classes = [0u16, 1];
+    let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..frame.view() };
+    let out = second_look(&view, RecutConfig::DEFAULT);
+    assert_eq!((out.poses.len(), out.stats.tried), (1, 0), "a producer's instance is its own");
+}
