@@ -215,6 +215,15 @@ pub struct Args {
     /// `estimator.class_alternates` (0 = off).
     #[arg(long, default_value_t = fusepose_estimator::alternates::DEFAULT_MIN_PROBABILITY)]
     pub class_alternates: f32,
+    /// With verification, class-label masks and the network: a region whose
+    /// verified pose covers less than this share of it is cut in two and
+    /// each piece estimated; the cut stays when both poses pass and lie
+    /// apart as two copies (0 = off), as the daemon's `estimator.recut`.
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.max_coverage)]
+    pub recut: f32,
+    /// `--recut`: how far apart the pieces' poses must be, × the object's smallest side.
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_separation)]
+    pub recut_separation: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -483,6 +492,10 @@ struct Runner {
     alternates_tried: usize,
     alternates_kept: usize,
     class_means: Vec<f32>,
+    /// `--recut`: the second look and the network sibling that estimates its
+    /// pieces; regions cut again and cuts kept.
+    recut: Option<(fusepose_estimator::recut::Recut, Box<dyn Estimator>)>,
+    recut_stats: [usize; 2],
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -539,6 +552,7 @@ impl Runner {
         let num_classes = u16::try_from(objects.len()).context("more than 65535 objects")?;
         // Only the segmenter's own regions are judged on its certainty.
         let region_floor = if masks == MaskSource::Net { region_floor } else { 0.0 };
+        let mut recut_parts = None;
         let (estimator, config): (Box<dyn Estimator>, WorkspaceConfig) = match kind {
             EstimatorKind::Icp => (
                 Box::new(IcpEstimator::new(objects, IcpConfig::default())?),
@@ -551,6 +565,17 @@ impl Runner {
                     .with_context(|| format!("loading {}", weights.display()))?;
                 let mut config = net.workspace_config(args.max_instances);
                 config.num_points = args.points.unwrap_or(config.num_points);
+                let recut_config = fusepose_estimator::recut::RecutConfig {
+                    max_coverage: args.recut,
+                    min_separation: args.recut_separation,
+                    ..fusepose_estimator::recut::RecutConfig::DEFAULT
+                };
+                if recut_config.is_on() && args.verify != "off" {
+                    let ws_config = WorkspaceConfig { num_classes, ..config };
+                    let recut =
+                        fusepose_estimator::recut::Recut::new(objects, solids.clone(), ws_config, recut_config)?;
+                    recut_parts = Some((recut, Box::new(net.untracked_sibling()) as Box<dyn Estimator>));
+                }
                 (Box::new(net), config)
             }
         };
@@ -631,6 +656,8 @@ impl Runner {
             alternates_tried: 0,
             alternates_kept: 0,
             class_means: Vec::new(),
+            recut: recut_parts,
+            recut_stats: [0; 2],
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -670,16 +697,17 @@ impl Runner {
         };
         self.poses.retain_confident(self.min_confidence);
         let seconds = start.elapsed().as_secs_f64();
+        if estimated.is_ok() {
+            self.verify(&view, frame, seg, metrics, seed);
+            self.suppress_explained(&view);
+            self.suppress_duplicates();
+            self.suppress_interpenetrating();
+        }
+        // After the second look, which may cut a region in two.
         if prepared_ok && frame.instances.iter().any(|&i| i != 0) {
             let ids: Vec<u32> =
                 (0..self.workspace.instances.len()).filter_map(|i| self.workspace.component_id(i)).collect();
             self.instance_counts.add_frame(&frame.instances, self.workspace.component_ids(), &ids);
-        }
-        if estimated.is_ok() {
-            self.verify(&view, frame, seg, metrics);
-            self.suppress_explained(&view);
-            self.suppress_duplicates();
-            self.suppress_interpenetrating();
         }
         if let Err(e) = estimated {
             let reason = match &e {
@@ -733,7 +761,14 @@ impl Runner {
     /// Verifies every pose against the frame's depth, counts what fails
     /// (ghosts vs poses of real objects, judged by matching before the drop)
     /// and, with `--verify drop`, removes the failures.
-    fn verify(&mut self, view: &FrameView<'_>, frame: &EvalFrame, seg: Option<&SegEngine>, metrics: &[ObjectMetric]) {
+    fn verify(
+        &mut self,
+        view: &FrameView<'_>,
+        frame: &EvalFrame,
+        seg: Option<&SegEngine>,
+        metrics: &[ObjectMetric],
+        seed: u64,
+    ) {
         let Some(verifier) = self.verifier.as_mut() else { return };
         let start = Instant::now();
         let ws = &self.workspace;
@@ -773,6 +808,30 @@ impl Runner {
             fusepose_estimator::poses::remove_marked(&mut verdicts, &marks);
             fusepose_estimator::poses::remove_marked(&mut passed, &marks);
         }
+        if let Some((recut, net)) = self.recut.as_mut() {
+            // The second look needs a verdict per pose; a pose without a region has none to cut.
+            let mut all: Vec<fusepose_estimator::verify::Verification> = verdicts
+                .iter()
+                .map(|v| {
+                    v.unwrap_or(fusepose_estimator::verify::Verification {
+                        mask_coverage: f32::NAN,
+                        ..Default::default()
+                    })
+                })
+                .collect();
+            let verifier = self.verifier.as_mut().expect("recut runs only with verification");
+            match recut.run(view, &mut self.workspace, &mut self.poses, &mut all, net.as_mut(), verifier, seg, seed) {
+                Ok(s) => {
+                    self.recut_stats[0] += s.tried;
+                    self.recut_stats[1] += s.kept;
+                    if s.kept > 0 {
+                        verdicts = all.into_iter().map(Some).collect();
+                        passed = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
+                    }
+                }
+                Err(e) => tracing::warn!("frame {}/{}: second look: {e}", frame.scene_id, frame.im_id),
+            }
+        }
         let instances = &self.workspace.instances;
         self.alternates_kept += self.poses.as_slice().iter().filter(|p| alternates::is_alternate(instances, p)).count();
         if trace {
@@ -782,6 +841,7 @@ impl Runner {
                     metrics.get(gt.class_id as usize - 1).map(|m| m.errors(&pose_of(p), &gt.pose).add_s)
                 });
                 if let Some(v) = v {
+                    let ws = &self.workspace;
                     // What the region truly covers: the most frequent true class under it (0 = no object).
                     let mut under = vec![0usize; metrics.len() + 1];
                     if let Some(id) = ws.component_id(p.instance_id as usize) {
@@ -923,6 +983,10 @@ impl Runner {
                 "class alternates (runner-up probability >= {}): {} regions estimated as a second class, {} kept as it",
                 self.class_alternates, self.alternates_tried, self.alternates_kept
             );
+        }
+        if self.recut.is_some() {
+            let [tried, kept] = self.recut_stats;
+            println!("regions looked at again (pose coverage below the recut limit): {tried} cut, {kept} kept as two");
         }
         if self.instance_counts.truth > 0 {
             println!("{}", self.instance_counts.summary());
