@@ -252,6 +252,12 @@ pub struct EstimatorConfig {
     /// that class too, and the better-verified pose is kept
     /// (`fusepose_estimator::alternates`). 0 = off.
     pub class_alternates: f32,
+    /// With verification, on class-label planes: a region whose verified
+    /// pose covers less than this share of it (two copies side by side that
+    /// passed as one) is cut in two, each piece estimated, and the cut kept
+    /// when both poses pass and are two copies by the depth image
+    /// (`fusepose_estimator::recut`). 0 = off.
+    pub recut: f32,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -378,6 +384,7 @@ impl Default for EstimatorConfig {
             max_interpenetration: fusepose_estimator::interpenetration::DEFAULT_MAX_SHARE,
             max_explained_share: fusepose_estimator::explained::DEFAULT_MAX_SHARE,
             class_alternates: fusepose_estimator::alternates::DEFAULT_MIN_PROBABILITY,
+            recut: fusepose_estimator::recut::RecutConfig::DEFAULT.max_coverage,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             seg_depth_regions: "on".to_owned(),
@@ -631,6 +638,7 @@ impl DaemonConfig {
             ("estimator.verify_min_thin_mask_agreement", e.verify_min_thin_mask_agreement),
             ("estimator.verify_min_region_probability", e.verify_min_region_probability),
             ("estimator.class_alternates", e.class_alternates),
+            ("estimator.recut", e.recut),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(invalid(key, v, "must be in 0..=1"));
@@ -799,6 +807,13 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\njoin_parts = -1.0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.join_parts"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\njoin_parts = 0\n").unwrap().estimator.join_parts, 0.0);
+        let err = DaemonConfig::parse("[estimator]\nrecut = 1.5\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.recut"), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\nrecut = 0\n").unwrap().estimator.recut, 0.0);
+        assert_eq!(
+            DaemonConfig::parse("").unwrap().estimator.recut,
+            fusepose_estimator::recut::RecutConfig::DEFAULT.max_coverage
+        );
         let err = DaemonConfig::parse("[estimator]\nsplit_regions = 0.2\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.split_regions"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\nsplit_regions = 0\n").unwrap().estimator.split_regions, 0.0);

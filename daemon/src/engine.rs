@@ -9,6 +9,7 @@ use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::alternates;
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
+use fusepose_estimator::recut::{Recut, RecutConfig};
 use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine, SegError, SegFile, VotingMode};
 use fusepose_estimator::split::CutLimits;
 use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
@@ -57,6 +58,12 @@ pub struct EngineSpec {
     /// `estimator.class_alternates`: the runner-up class probability at which a
     /// segmenter region is estimated as that class too (0 = off).
     pub class_alternates: f32,
+    /// Makes the estimator of [`fusepose_estimator::recut`]'s pieces (one
+    /// that never tracks); None for `kind = "none"`.
+    pub piece_factory: Option<EstimatorFactory>,
+    /// `estimator.recut`: the objects, their solids and the second look's
+    /// settings (None = off).
+    pub recut: Option<(Arc<ObjectSet>, Arc<Solids>, RecutConfig)>,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
     /// What the segmenter does with a centre-offset head (`estimator.seg_voting`).
@@ -193,6 +200,15 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         if config.max_interpenetration < 1.0 {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
         }
+        // A second look needs a pose's verification to decide.
+        let recut = RecutConfig { max_coverage: config.recut, ..RecutConfig::DEFAULT };
+        if let Some((objects, _, _)) = spec.verify.as_ref().filter(|_| recut.is_on()) {
+            let solids = match &spec.interpenetration {
+                Some((solids, _)) => solids.clone(),
+                None => Arc::new(Solids::new(objects)),
+            };
+            spec.recut = Some((objects.clone(), solids, recut));
+        }
         spec.segmenter = segmenter(config, &objects)?;
         if let (Some((_, cfg, _)), Some(seg)) = (spec.verify.as_mut(), spec.segmenter.as_deref()) {
             cfg.min_region_probability = cfg.min_region_probability.max(calibrated_floor(config, seg));
@@ -241,6 +257,8 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             interpenetration: None,
             max_explained: 1.0,
             class_alternates: 0.0,
+            piece_factory: Some(icp_factory(objects.clone())),
+            recut: None,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
@@ -264,6 +282,8 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             interpenetration: None,
             max_explained: 1.0,
             class_alternates: 0.0,
+            piece_factory: None,
+            recut: None,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
@@ -337,7 +357,9 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
     );
     // Every camera gets a sibling of the probe: one copy of the weights and
     // one worker thread for all cameras (they take turns), own buffers and state.
+    let pieces = probe.untracked_sibling();
     let factory: EstimatorFactory = Box::new(move || Ok(Box::new(probe.sibling()) as Box<dyn Estimator>));
+    let piece_factory: EstimatorFactory = Box::new(move || Ok(Box::new(pieces.sibling()) as Box<dyn Estimator>));
     Ok(EngineSpec {
         description,
         factory: Some(factory),
@@ -353,6 +375,8 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         interpenetration: None,
         max_explained: 1.0,
         class_alternates: 0.0,
+        piece_factory: Some(piece_factory),
+        recut: None,
         seg_boundary: Boundary::default(),
         seg_voting: VotingMode::Off,
         seg_depth_regions: None,
@@ -421,6 +445,12 @@ pub struct PoseEngine {
     deadline: Option<std::time::Instant>,
     /// The segmenter's instance → class table for the current frame.
     instance_classes: Vec<u16>,
+    /// `estimator.recut`: the second look and the estimator of its pieces.
+    recut: Option<(Recut, Box<dyn Estimator>)>,
+    /// Regions the second look cut in two in the last frame.
+    recut_kept: usize,
+    /// Moving average of the second look's time per region looked at, ns.
+    recut_ns_per_region: f64,
 }
 
 /// Safety factor on the measured post-estimate time per pose when reserving it.
@@ -586,6 +616,14 @@ impl PoseEngine {
             }
             None => None,
         };
+        let recut = match (&workspace, &spec.recut, &spec.piece_factory) {
+            (Some(_), Some((objects, solids, config)), Some(factory)) => {
+                let recut = Recut::new(objects, solids.clone(), workspace_config, *config)
+                    .map_err(|e| anyhow::anyhow!("estimator.recut: {e}"))?;
+                Some((recut, factory()?))
+            }
+            _ => None,
+        };
         let segmenter = match (&estimator, &spec.segmenter) {
             (Some(_), Some(file)) => Some(match spec.shared_segmenter.get() {
                 Some(shared) => shared.clone(),
@@ -627,6 +665,9 @@ impl PoseEngine {
             post_estimate_ns: 0.0,
             deadline: None,
             instance_classes: Vec::with_capacity(fusepose_estimator::seg::voting::MAX_INSTANCES + 1),
+            recut,
+            recut_kept: 0,
+            recut_ns_per_region: 0.0,
         })
     }
 
@@ -661,6 +702,9 @@ impl PoseEngine {
             post_estimate_ns: 0.0,
             deadline: None,
             instance_classes: Vec::new(),
+            recut: None,
+            recut_kept: 0,
+            recut_ns_per_region: 0.0,
         })
     }
 
@@ -746,6 +790,50 @@ impl PoseEngine {
                     frame,
                     &mut self.duplicate_marks,
                 );
+                self.recut_kept = 0;
+                let recut_start = fusepose_client::monotonic_ns();
+                if let (Some((recut, pieces)), Some(verifier), Some(ws)) =
+                    (self.recut.as_mut(), self.verifier.as_mut(), self.workspace.as_mut())
+                {
+                    // The pieces get what is left of the frame's time less the
+                    // steps after them, and are shed first: their time is not
+                    // in the post-estimate reserve, so they never take the
+                    // frame's own poses' time.
+                    let deadline = self.deadline.map(|d| d.checked_sub(reserve).unwrap_or(d));
+                    pieces.set_deadline(deadline);
+                    if let Some(d) = deadline {
+                        // As many regions as the time left pays for at their measured cost.
+                        let left = d.saturating_duration_since(std::time::Instant::now()).as_nanos() as f64;
+                        let per_region = POST_ESTIMATE_MARGIN * self.recut_ns_per_region;
+                        recut.limit_next_frame(if per_region > 0.0 { (left / per_region) as usize } else { 1 });
+                    }
+                    let poses = &mut self.poses;
+                    match recut.run(
+                        frame,
+                        ws,
+                        poses,
+                        &mut self.verdicts,
+                        pieces.as_mut(),
+                        verifier,
+                        seg.as_deref(),
+                        seed,
+                    ) {
+                        Ok(stats) => {
+                            self.recut_kept = stats.kept;
+                            if stats.tried > 0 {
+                                let ns = (fusepose_client::monotonic_ns() - recut_start) as f64 / stats.tried as f64;
+                                self.recut_ns_per_region = match self.recut_ns_per_region {
+                                    0.0 => ns,
+                                    old => old + POST_ESTIMATE_GAIN * (ns - old),
+                                };
+                            }
+                        }
+                        Err(e) => {
+                            tracing::debug!(error = %e, "second look at a region failed; the region keeps its pose")
+                        }
+                    }
+                }
+                let recut_ns = fusepose_client::monotonic_ns() - recut_start;
                 drop(seg);
                 self.rejected = if self.verify_drop { self.failed_verification } else { 0 };
                 drop_explained(
@@ -777,7 +865,7 @@ impl PoseEngine {
                 // planned with its own count (a decaying maximum of whole frames
                 // kept one slow frame's cost for the next hundred).
                 if estimated > 0 {
-                    let per_pose = (fusepose_client::monotonic_ns() - t2) as f64 / estimated as f64;
+                    let per_pose = (fusepose_client::monotonic_ns() - t2 - recut_ns) as f64 / estimated as f64;
                     self.post_estimate_ns = match self.post_estimate_ns {
                         0.0 => per_pose,
                         old => old + POST_ESTIMATE_GAIN * (per_pose - old),
@@ -892,5 +980,21 @@ mod tests {
         assert_eq!((p.min_majority_share, p.absorb_below_share), (0.5, 0.0));
         let off = EstimatorConfig { seg_depth_regions: "off".into(), ..shipped_config() };
         assert!(resolve(&off).unwrap().seg_depth_regions.is_none());
+    }
+
+    #[test]
+    fn the_second_look_is_on_by_default_and_needs_verification() {
+        let spec = resolve(&shipped_config()).unwrap();
+        let (objects, _, config) = spec.recut.as_ref().expect("on by default");
+        assert_eq!(*config, RecutConfig::DEFAULT);
+        assert_eq!(objects.len(), load_objects(&shipped_config()).unwrap().len());
+        let engine = PoseEngine::new(&spec).unwrap();
+        assert!(engine.recut.is_some(), "each camera's engine has its own second look and piece estimator");
+        let tuned = EstimatorConfig { recut: 0.7, ..shipped_config() };
+        assert_eq!(resolve(&tuned).unwrap().recut.unwrap().2.max_coverage, 0.7);
+        let off = EstimatorConfig { recut: 0.0, ..shipped_config() };
+        assert!(resolve(&off).unwrap().recut.is_none());
+        let unverified = EstimatorConfig { verify: "off".into(), ..shipped_config() };
+        assert!(resolve(&unverified).unwrap().recut.is_none(), "no verdicts, nothing to decide with");
     }
 }
