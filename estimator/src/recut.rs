@@ -184,6 +184,9 @@ impl Recut {
         if !class_plane || !self.config.is_on() || verdicts.len() != poses.len() {
             return Ok(stats);
         }
+        if self.ids.len() != frame.width() * frame.height() {
+            self.warm_up(frame, estimator, seed)?;
+        }
         self.choose(poses.as_slice(), verdicts);
         if self.candidates.is_empty() {
             return Ok(stats);
@@ -210,6 +213,43 @@ impl Recut {
         Ok(stats)
     }
 
+    /// Once per frame size: sizes the piece plane, and estimates a square
+    /// piece at the frame's centre as class 1, so that the second workspace
+    /// and the piece estimator have met a frame of this size and an instance
+    /// before a region first qualifies (no later frame allocates).
+    fn warm_up(
+        &mut self,
+        frame: &FrameView<'_>,
+        estimator: &mut dyn Estimator,
+        seed: u64,
+    ) -> Result<(), EstimateError> {
+        let (w, h) = (frame.width(), frame.height());
+        self.ids.clear();
+        self.ids.resize(w * h, 0);
+        self.written.clear();
+        self.classes.fill(0);
+        let side = (w.min(h) / 8).max(1);
+        let (u0, v0) = ((w - side) / 2, (h - side) / 2);
+        for v in v0..v0 + side {
+            self.ids[v * w + u0..v * w + u0 + side].fill(1);
+        }
+        self.classes[1] = 1;
+        let (ids, classes) = (std::mem::take(&mut self.ids), std::mem::take(&mut self.classes));
+        let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..*frame };
+        let warmed = self
+            .ws
+            .prepare(&view, seed)
+            .map_err(EstimateError::Frame)
+            .and_then(|_| estimator.estimate(&view, &mut self.ws, &mut self.poses));
+        (self.ids, self.classes) = (ids, classes);
+        for v in v0..v0 + side {
+            self.ids[v * w + u0..v * w + u0 + side].fill(0);
+        }
+        self.classes.fill(0);
+        self.poses.clear();
+        warmed
+    }
+
     /// The regions to look at, lowest coverage first.
     fn choose(&mut self, poses: &[ObjectPose], verdicts: &[Verification]) {
         self.candidates.clear();
@@ -233,11 +273,6 @@ impl Recut {
     /// uneven are dropped.
     fn cut(&mut self, frame: &FrameView<'_>, ws: &Workspace, poses: &[ObjectPose]) {
         let (w, h) = (frame.width(), frame.height());
-        if self.ids.len() != w * h {
-            self.ids.clear();
-            self.ids.resize(w * h, 0);
-            self.written.clear();
-        }
         for b in self.written.drain(..) {
             let [u0, v0, u1, v1] = b.map(|x| x as usize);
             for v in v0..=v1.min(h.saturating_sub(1)) {

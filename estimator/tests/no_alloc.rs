@@ -189,3 +189,52 @@ fn instance_planes_do_not_allocate_after_warm_up() {
         }
     }
 }
+
+#[test]
+fn the_second_look_does_not_allocate_after_warm_up() {
+    use fusepose_estimator::interpenetration::Solids;
+    use fusepose_estimator::recut::{Recut, RecutConfig};
+    use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
+
+    let l = l_block();
+    let objects = object_set(&[l.clone()]);
+    let config = WorkspaceConfig { num_classes: 1, ..Default::default() };
+    let mut ws = Workspace::new(config).unwrap();
+    let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+    let mut pieces = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+    let mut verifier = Verifier::new(&objects, VerifyConfig::default());
+    let solids = std::sync::Arc::new(Solids::new(&objects));
+    let mut recut = Recut::new(&objects, solids, config, RecutConfig::DEFAULT).unwrap();
+    let mut poses = PoseSet::with_capacity(2 * config.max_instances);
+    let mut verdicts = Vec::with_capacity(2 * config.max_instances);
+    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| {
+        let view = frame.view();
+        ws.prepare(&view, seed).unwrap();
+        icp.estimate(&view, &mut ws, &mut poses).unwrap();
+        verdicts.clear();
+        for p in poses.as_slice() {
+            let id = ws.component_id(p.instance_id as usize).unwrap();
+            verdicts.push(verifier.verify(&view, MaskRef { ids: ws.component_ids(), id, bbox: p.bbox }, p));
+        }
+        let stats =
+            recut.run(&view, &mut ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap();
+        (stats.kept, poses.len())
+    };
+    // Warm-up on a frame where no region qualifies: the first pair comes later.
+    let single = painted(render(&[(1, &l, pose([0.0, 0.0, 1.0], 10.0, [0.0, 0.0, 0.5]))]));
+    assert_eq!(frame_of(&single, 0), (0, 1));
+    let pair = |deg: f64, y: f64| {
+        painted(render(&[
+            (1, &l, pose([0.0, 0.0, 1.0], deg, [-0.04, y, 0.5])),
+            (1, &l, pose([0.0, 0.0, 1.0], deg, [0.04, y, 0.5])),
+        ]))
+    };
+    let frames = [pair(10.0, 0.0), single, pair(10.0, 0.02)];
+    for (i, frame) in frames.iter().enumerate() {
+        let mut outcome = (0, 0);
+        let n = allocations_in(|| outcome = frame_of(frame, 10 + i as u64));
+        assert_eq!(n, 0, "frame {i}: {n} allocations in prepare, estimate, verification and the second look");
+        let expected = if i == 1 { (0, 1) } else { (1, 2) };
+        assert_eq!(outcome, expected, "frame {i}: (cuts kept, poses)");
+    }
+}
