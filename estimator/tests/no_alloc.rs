@@ -197,7 +197,7 @@ fn the_second_look_does_not_allocate_after_warm_up() {
     use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
 
     let l = l_block();
-    let objects = object_set(&[l.clone()]);
+    let objects = object_set(std::slice::from_ref(&l));
     let config = WorkspaceConfig { num_classes: 1, ..Default::default() };
     let mut ws = Workspace::new(config).unwrap();
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
