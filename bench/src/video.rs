@@ -54,8 +54,22 @@ pub fn render_video(
     degrees_per_frame: f64,
     seed: u64,
 ) -> anyhow::Result<Video> {
+    render_video_with(set, objects, false, frames, degrees_per_frame, seed)
+}
+
+/// As [`render_video`]; with `pair`, one of the drawn classes stands twice,
+/// the copies side by side and touching (0–3 mm apart).
+pub fn render_video_with(
+    set: &ObjectSet,
+    objects: usize,
+    pair: bool,
+    frames: usize,
+    degrees_per_frame: f64,
+    seed: u64,
+) -> anyhow::Result<Video> {
     let intrinsics = Intrinsics::YCB_VIDEO;
     let cfg = SamplerConfig {
+        pair_probability: if pair { 1.0 } else { 0.0 },
         min_objects: objects,
         max_objects: objects,
         camera_distance_m: (0.7, 0.9),

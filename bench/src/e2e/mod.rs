@@ -34,6 +34,10 @@ pub struct E2eArgs {
     /// Objects per frame.
     #[arg(long, alias = "objects", default_value_t = 5)]
     pub objects_per_frame: usize,
+    /// One of the drawn classes stands twice, the copies side by side and
+    /// touching (a frame then holds objects-per-frame + 1 objects).
+    #[arg(long)]
+    pub pair: bool,
     /// Cameras served by the one daemon, each with its own producer and consumer (1..=8).
     #[arg(long, default_value_t = 1)]
     pub cameras: usize,
@@ -87,6 +91,7 @@ impl Default for E2eArgs {
         Self {
             fps: vec![24.0, 30.0, 60.0],
             objects_per_frame: 5,
+            pair: false,
             cameras: 1,
             seconds: 20.0,
             deadline_ms: None,
@@ -264,7 +269,7 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<Vec<RateResult>> {
                 "e2e-producer".into(),
                 fps.to_string(),
                 frames.to_string(),
-                args.objects_per_frame.to_string(),
+                if args.pair { format!("{}:pair", args.objects_per_frame) } else { args.objects_per_frame.to_string() },
                 (args.seed + i as u64).to_string(),
                 video_frames.to_string(),
                 name.clone(),

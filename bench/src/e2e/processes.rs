@@ -43,18 +43,22 @@ pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
 pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
     anyhow::ensure!(
         (5..=7).contains(&args.len()),
-        "usage: e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES [CAMERA [GO_FILE]]"
+        "usage: e2e-producer FPS FRAMES OBJECTS[:pair] SEED VIDEO_FRAMES [CAMERA [GO_FILE]]"
     );
     let camera = args.get(5).map_or(CAMERA, String::as_str);
     // With several producers: start sending only once every one has rendered its video.
     let go_file = args.get(6).map(std::path::PathBuf::from);
     let fps: f64 = args[0].parse()?;
     let frames: u64 = args[1].parse()?;
-    let objects: usize = args[2].parse()?;
+    // `N:pair`: N classes, one of them standing twice as a touching pair.
+    let (objects, pair) = match args[2].split_once(':') {
+        Some((n, "pair")) => (n.parse::<usize>()?, true),
+        _ => (args[2].parse::<usize>()?, false),
+    };
     let seed: u64 = args[3].parse()?;
     let video_frames: usize = args[4].parse()?;
     let set = fusepose_scene::builtin::builtin_objects();
-    let video = video::render_video(&set, objects, video_frames, 0.5, seed)?;
+    let video = video::render_video_with(&set, objects, pair, video_frames, 0.5, seed)?;
     let k = video.intrinsics;
     let layout = FrameLayout {
         width: k.width,
