@@ -749,6 +749,11 @@ impl PoseEngine {
             _ => frame,
         };
         let t0 = fusepose_client::monotonic_ns();
+        // A pair cut in the last frame is cut again now, so that its pieces
+        // are in this frame's own estimate (`Recut::hints`).
+        if let Some((recut, _)) = self.recut.as_ref() {
+            workspace.set_cut_hints(recut.hints());
+        }
         let instances = workspace.prepare(frame, seed)?;
         if used_segmenter
             && self.class_alternates > 0.0
@@ -805,7 +810,11 @@ impl PoseEngine {
                         // As many regions as the time left pays for at their measured cost.
                         let left = d.saturating_duration_since(std::time::Instant::now()).as_nanos() as f64;
                         let per_region = POST_ESTIMATE_MARGIN * self.recut_ns_per_region;
-                        recut.limit_next_frame(if per_region > 0.0 { (left / per_region) as usize } else { 1 });
+                        match if per_region > 0.0 { (left / per_region) as usize } else { 1 } {
+                            // No time for the pieces: the next frame's estimate poses them.
+                            0 => recut.defer_next_frame(),
+                            n => recut.limit_next_frame(n),
+                        }
                     }
                     let poses = &mut self.poses;
                     match recut.run(
@@ -819,8 +828,8 @@ impl PoseEngine {
                         seed,
                     ) {
                         Ok(stats) => {
-                            self.recut_kept = stats.kept;
-                            if stats.tried > 0 {
+                            self.recut_kept = stats.kept + stats.carried;
+                            if stats.tried > 0 && stats.deferred == 0 {
                                 let ns = (fusepose_client::monotonic_ns() - recut_start) as f64 / stats.tried as f64;
                                 self.recut_ns_per_region = match self.recut_ns_per_region {
                                     0.0 => ns,

@@ -19,6 +19,16 @@
 //! centre (the network's per-point translations point at the object's
 //! centre from any part of it); two copies vote for two.
 //!
+//! In a live stream the second look rarely has the time: two pieces'
+//! estimates and checks cost more than a busy frame leaves. So a cut that
+//! stood is carried to the next frame ([`Recut::hints`] →
+//! [`Workspace::set_cut_hints`]): the region is cut before the estimate and
+//! its pieces are posed with the frame's other objects, then judged by the
+//! same terms ([`RecutStats::carried`]); a frame without the time for the
+//! pieces defers its cuts to the next frame that way
+//! ([`Recut::defer_next_frame`]), and a deferred cut the next frame refuses
+//! keeps that place whole for [`REFUSED_FRAMES`] frames.
+//!
 //! Class planes only: an instance plane's instances are the producer's.
 //! Buffers are sized in [`Recut::new`] and on the first frame of a size;
 //! a frame then allocates nothing.
@@ -30,11 +40,25 @@ use crate::poses::{ObjectPose, PoseSet};
 use crate::seg::SegEngine;
 use crate::split::{kmeans, nearest, nearest_2d, project};
 use crate::verify::{MaskRef, Verification, Verifier};
-use crate::workspace::{Workspace, WorkspaceConfig, WorkspaceConfigError};
+use crate::workspace::{CutHint, Workspace, WorkspaceConfig, WorkspaceConfigError};
 use crate::{EstimateError, Estimator};
 
 /// Points per region the cut clusters.
 const SAMPLES: usize = 128;
+/// Frames for which a deferred cut that the next frame refused is not
+/// deferred again near the same place (one second at 24 FPS).
+pub const REFUSED_FRAMES: u32 = 24;
+
+/// A refused cut: where, of which class, and for how many more frames.
+#[derive(Clone, Copy, Debug)]
+struct Refused {
+    class_id: u16,
+    midpoint: [f32; 3],
+    /// Distance within which a new cut counts as the same, metres.
+    reach: f32,
+    frames: u32,
+}
+
 /// Fewest valid-depth pixels of a region worth cutting.
 const MIN_POINTS: usize = 64;
 /// Each piece must hold at least this share of the region's samples: a
@@ -79,6 +103,11 @@ pub struct RecutStats {
     pub tried: usize,
     /// Of them, regions whose cut stayed (each now two instances).
     pub kept: usize,
+    /// Cuts carried from the last frame ([`Recut::hints`]) that held again.
+    pub carried: usize,
+    /// Regions cut but not estimated ([`Recut::defer_next_frame`]): their
+    /// cuts are carried to the next frame untried.
+    pub deferred: usize,
 }
 
 /// A region chosen for a second look.
@@ -87,6 +116,7 @@ struct Candidate {
     /// Index of the region's pose in the frame's poses.
     pose: usize,
     coverage: f32,
+    class_id: u16,
 }
 
 /// Cuts, estimates and judges regions again; see the module doc.
@@ -114,6 +144,14 @@ pub struct Recut {
     marks: Vec<bool>,
     /// [`Recut::limit_next_frame`]'s cap, for the next frame only.
     frame_limit: Option<usize>,
+    /// [`Recut::defer_next_frame`], for the next frame only.
+    defer: Option<()>,
+    /// Cuts the next frame refused, per class and midpoint, with the frames
+    /// for which no region there is cut again without its pieces' poses.
+    refused: Vec<Refused>,
+    /// The cuts that stood in the last frame, to make again in the next
+    /// ([`Recut::hints`]).
+    carried: Vec<CutHint>,
 }
 
 impl Recut {
@@ -144,11 +182,36 @@ impl Recut {
             centres: Vec::with_capacity(regions),
             marks: Vec::with_capacity(4 * ws_config.max_instances),
             frame_limit: None,
+            defer: None,
+            refused: Vec::with_capacity(ws_config.max_instances),
+            carried: Vec::with_capacity(ws_config.max_instances),
         })
     }
 
     pub fn config(&self) -> &RecutConfig {
         &self.config
+    }
+
+    /// The cuts that stood in the last [`Recut::run`]: the second look's
+    /// kept cuts and the carried cuts that held again. A live stream passes
+    /// them to [`Workspace::set_cut_hints`] before its next frame's prepare,
+    /// so that a pair cut once is estimated as two instances in the frame's
+    /// own estimate from then on (the second look itself needs time a busy
+    /// frame does not have). Frames that are not a stream (an evaluation's
+    /// independent views) must not.
+    pub fn hints(&self) -> &[CutHint] {
+        &self.carried
+    }
+
+    /// In the next [`Recut::run`] only: cut the regions that qualify but do
+    /// not estimate their pieces; carry the cuts to the next frame instead
+    /// ([`Recut::hints`]), whose own estimate poses the pieces and where
+    /// they are judged by the same terms. For a frame without the time for
+    /// the pieces (the daemon). A cut refused there is not deferred again
+    /// for [`REFUSED_FRAMES`] frames, so one object does not alternate
+    /// between whole and halved.
+    pub fn defer_next_frame(&mut self) {
+        self.defer = Some(());
     }
 
     /// Looks at no more than `regions` regions in the next [`Recut::run`]
@@ -180,10 +243,17 @@ impl Recut {
         seed: u64,
     ) -> Result<RecutStats, EstimateError> {
         let mut stats = RecutStats::default();
+        // What stood in the last frame is carried only into the next.
+        self.carried.clear();
+        for r in &mut self.refused {
+            r.frames = r.frames.saturating_sub(1);
+        }
+        self.refused.retain(|r| r.frames > 0);
         let class_plane = frame.labels.is_some_and(|l| !l.is_instances());
         if !class_plane || !self.config.is_on() || verdicts.len() != poses.len() {
             return Ok(stats);
         }
+        stats.carried = self.check_hinted(frame, ws, poses, verdicts, verifier);
         if self.ids.len() != frame.width() * frame.height() {
             self.warm_up(frame, estimator, seed)?;
         }
@@ -194,6 +264,12 @@ impl Recut {
         self.cut(frame, ws, poses.as_slice());
         stats.tried = self.centres.len();
         if stats.tried == 0 {
+            return Ok(stats);
+        }
+        if self.defer.take().is_some() {
+            // No time for the pieces now: the next frame's own estimate
+            // poses them, and `check_hinted` judges the cut there.
+            stats.deferred = self.defer_cuts();
             return Ok(stats);
         }
         // Out of `self` while the view borrows them (no allocation).
@@ -250,6 +326,80 @@ impl Recut {
         warmed
     }
 
+    /// Judges the pieces of the cuts `ws` made from carried hints as the
+    /// second look judges its own: a cut that holds is carried on; of one
+    /// that does not, the piece pose that fits worse is dropped (the two are
+    /// one object seen twice) and the cut is forgotten. Returns how many held.
+    fn check_hinted(
+        &mut self,
+        view: &FrameView<'_>,
+        ws: &Workspace,
+        poses: &mut PoseSet,
+        verdicts: &mut Vec<Verification>,
+        verifier: &mut Verifier,
+    ) -> usize {
+        self.marks.clear();
+        self.marks.resize(poses.len(), false);
+        let terms = Terms { config: &self.config, sides: &self.sides, solids: &self.solids };
+        let mut held = 0;
+        for &[ida, idb] in ws.hinted_pieces() {
+            let find =
+                |id: u32| poses.as_slice().iter().position(|p| ws.component_id(p.instance_id as usize) == Some(id));
+            let (Some(a), Some(b)) = (find(ida), find(idb)) else { continue };
+            let (pa, pb) = (poses.as_slice()[a], poses.as_slice()[b]);
+            let ids = ws.component_ids();
+            let ma = MaskRef { ids, id: ida, bbox: pa.bbox };
+            let mb = MaskRef { ids, id: idb, bbox: pb.bbox };
+            if terms.two_copies(view, verifier, (&pa, &verdicts[a], ma), (&pb, &verdicts[b], mb)) {
+                let centre = |i: usize| {
+                    let inst = ws.instances[i];
+                    let points = &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)];
+                    let n = points.len().max(1) as f32;
+                    points.iter().fold([0.0f32; 3], |c, p| [c[0] + p[0] / n, c[1] + p[1] / n, c[2] + p[2] / n])
+                };
+                if self.carried.len() < self.carried.capacity() {
+                    let centres = [centre(pa.instance_id as usize), centre(pb.instance_id as usize)];
+                    self.carried.push(CutHint { class_id: pa.class_id, centres });
+                }
+                held += 1;
+            } else {
+                let worse = if verdicts[a].fit >= verdicts[b].fit { b } else { a };
+                self.marks[worse] = true;
+                if self.refused.len() < self.refused.capacity() {
+                    let (ta, tb) = (pa.translation, pb.translation);
+                    let midpoint = [(ta.x + tb.x) as f32 / 2.0, (ta.y + tb.y) as f32 / 2.0, (ta.z + tb.z) as f32 / 2.0];
+                    let side = self.sides.get(pa.class_id as usize - 1).copied().unwrap_or(0.0);
+                    self.refused.push(Refused { class_id: pa.class_id, midpoint, reach: side, frames: REFUSED_FRAMES });
+                }
+            }
+        }
+        if self.marks.iter().any(|&m| m) {
+            poses.remove_marked(&self.marks);
+            crate::poses::remove_marked(verdicts, &self.marks);
+        }
+        held
+    }
+
+    /// Carries this frame's cuts to the next untried, except near a cut
+    /// refused lately; returns how many.
+    fn defer_cuts(&mut self) -> usize {
+        let mut deferred = 0;
+        for (j, c) in self.candidates.iter().enumerate() {
+            let (centres, class_id) = (self.centres[j], c.class_id);
+            let mid = [0, 1, 2].map(|k| (centres[0][k] + centres[1][k]) / 2.0);
+            let near = |r: &Refused| {
+                r.class_id == class_id
+                    && (0..3).map(|k| (r.midpoint[k] - mid[k]).powi(2)).sum::<f32>() < r.reach * r.reach
+            };
+            if self.refused.iter().any(near) || self.carried.len() >= self.carried.capacity() {
+                continue;
+            }
+            self.carried.push(CutHint { class_id, centres });
+            deferred += 1;
+        }
+        deferred
+    }
+
     /// The regions to look at, lowest coverage first.
     fn choose(&mut self, poses: &[ObjectPose], verdicts: &[Verification]) {
         self.candidates.clear();
@@ -259,7 +409,7 @@ impl Recut {
             // whose pose failed is more often another object taken for this
             // class, and its pieces' poses fit a small model anywhere.
             if v.passed && coverage < self.config.max_coverage && poses[k].class_id as usize <= self.sides.len() {
-                self.candidates.push(Candidate { pose: k, coverage });
+                self.candidates.push(Candidate { pose: k, coverage, class_id: poses[k].class_id });
             }
         }
         self.candidates.sort_unstable_by(|a, b| a.coverage.total_cmp(&b.coverage));
@@ -373,41 +523,15 @@ impl Recut {
         self.poses.as_slice().iter().position(|p| self.ws.component_id(p.instance_id as usize) == Some(want))
     }
 
-    /// Whether candidate `j`'s pieces are two copies by the depth image and
-    /// by their poses: see [`RecutConfig`] for each term.
-    fn two_copies(&mut self, j: usize, view: &FrameView<'_>, verifier: &mut Verifier) -> bool {
+    /// Whether candidate `j`'s pieces are two copies ([`Terms::two_copies`]).
+    fn pieces_are_two_copies(&mut self, j: usize, view: &FrameView<'_>, verifier: &mut Verifier) -> bool {
         let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { return false };
         let (pa, pb) = (self.poses.as_slice()[a], self.poses.as_slice()[b]);
-        if !(self.verdicts[a].passed && self.verdicts[b].passed) {
-            return false;
-        }
-        let side = self.sides.get(pa.class_id as usize - 1).copied().unwrap_or(0.0);
-        if (pa.translation - pb.translation).norm() < (self.config.min_separation * side) as f64 {
-            return false;
-        }
-        let mask = |piece: usize, bbox: [u16; 4]| MaskRef {
-            ids: self.ws.component_ids(),
-            id: (2 * j + 1 + piece) as u32,
-            bbox,
-        };
-        let explained = verifier.explained_share(view, mask(1, pb.bbox), &pa).max(verifier.explained_share(
-            view,
-            mask(0, pa.bbox),
-            &pb,
-        ));
-        if explained >= self.config.max_cross_explained {
-            return false;
-        }
-        let iso =
-            |p: &ObjectPose| nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(p.translation), p.rotation);
-        let (ia, ib) = (iso(&pa), iso(&pb));
-        let overlap = self.solids.share_inside(pa.class_id, &ia, pb.class_id, &ib).max(self.solids.share_inside(
-            pb.class_id,
-            &ib,
-            pa.class_id,
-            &ia,
-        ));
-        overlap <= self.config.max_overlap
+        let ids = self.ws.component_ids();
+        let ma = MaskRef { ids, id: (2 * j + 1) as u32, bbox: pa.bbox };
+        let mb = MaskRef { ids, id: (2 * j + 2) as u32, bbox: pb.bbox };
+        let terms = Terms { config: &self.config, sides: &self.sides, solids: &self.solids };
+        terms.two_copies(view, verifier, (&pa, &self.verdicts[a], ma), (&pb, &self.verdicts[b], mb))
     }
 
     /// Keeps the cuts the depth image supports; returns how many.
@@ -427,7 +551,7 @@ impl Recut {
         let mut kept = 0;
         for j in 0..self.candidates.len() {
             let whole = self.candidates[j].pose;
-            if !self.two_copies(j, view, verifier) {
+            if !self.pieces_are_two_copies(j, view, verifier) {
                 continue;
             }
             let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { continue };
@@ -452,6 +576,9 @@ impl Recut {
             poses.push(placed(pa, i));
             verdicts.push(va);
             self.marks.push(false);
+            if self.carried.len() < self.carried.capacity() {
+                self.carried.push(CutHint { class_id: pa.class_id, centres: self.centres[j] });
+            }
             kept += 1;
         }
         if kept > 0 {
@@ -459,5 +586,47 @@ impl Recut {
             crate::poses::remove_marked(verdicts, &self.marks);
         }
         kept
+    }
+}
+
+/// The terms that tell two copies from one object cut in two.
+struct Terms<'a> {
+    config: &'a RecutConfig,
+    sides: &'a [f32],
+    solids: &'a crate::interpenetration::Solids,
+}
+
+impl Terms<'_> {
+    /// Whether poses `a` and `b`, each with its verification and mask, are
+    /// two copies: both passed, they lie apart, neither explains the other's
+    /// mask, and their solids do not overlap ([`RecutConfig`]).
+    fn two_copies(
+        &self,
+        view: &FrameView<'_>,
+        verifier: &mut Verifier,
+        (pa, va, ma): (&ObjectPose, &Verification, MaskRef<'_>),
+        (pb, vb, mb): (&ObjectPose, &Verification, MaskRef<'_>),
+    ) -> bool {
+        if !(va.passed && vb.passed) {
+            return false;
+        }
+        let side = self.sides.get(pa.class_id as usize - 1).copied().unwrap_or(0.0);
+        if (pa.translation - pb.translation).norm() < (self.config.min_separation * side) as f64 {
+            return false;
+        }
+        let explained = verifier.explained_share(view, mb, pa).max(verifier.explained_share(view, ma, pb));
+        if explained >= self.config.max_cross_explained {
+            return false;
+        }
+        let iso =
+            |p: &ObjectPose| nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(p.translation), p.rotation);
+        let (ia, ib) = (iso(pa), iso(pb));
+        let overlap = self.solids.share_inside(pa.class_id, &ia, pb.class_id, &ib).max(self.solids.share_inside(
+            pb.class_id,
+            &ib,
+            pa.class_id,
+            &ia,
+        ));
+        overlap <= self.config.max_overlap
     }
 }

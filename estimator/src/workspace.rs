@@ -98,6 +98,20 @@ impl Instance {
     }
 }
 
+/// How far from a hint's projected centre its region may lie, pixels.
+pub const HINT_REACH_PX: usize = 12;
+
+/// A cut to make in the next [`Workspace::prepare`]: the region of class
+/// `class_id` that holds the projections of both `centres` (camera frame,
+/// metres) is cut between them, each pixel to its nearer centre. The
+/// daemon carries a cut kept in one frame to the next this way
+/// ([`crate::recut`]), so the pieces enter that frame's own estimate.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct CutHint {
+    pub class_id: u16,
+    pub centres: [[f32; 3]; 2],
+}
+
 /// What [`Workspace::prepare`] skipped in the last frame (for the daemon's counters).
 #[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
 pub struct PrepareStats {
@@ -134,6 +148,10 @@ pub struct Workspace {
     joiner: Option<PartJoiner>,
     /// Cuts same-class regions that hold several objects; `None` keeps every region.
     splitter: Option<RegionSplitter>,
+    /// Cuts for the next frame ([`Workspace::set_cut_hints`]) and the
+    /// component ids of the pieces they made in the last one.
+    hints: Vec<CutHint>,
+    hinted: Vec<[u32; 2]>,
     stats: PrepareStats,
 }
 
@@ -166,6 +184,8 @@ impl Workspace {
             picked: resident::vec(0, n),
             joiner: None,
             splitter: None,
+            hints: Vec::with_capacity(m),
+            hinted: Vec::with_capacity(m),
             stats: PrepareStats::default(),
         })
     }
@@ -198,6 +218,11 @@ impl Workspace {
         if let Some(splitter) = self.splitter.as_mut().filter(|_| !labels.is_instances()) {
             self.stats.split_regions = splitter.split(&mut self.finder, frame, limits);
         }
+        self.hinted.clear();
+        if !labels.is_instances() {
+            self.apply_hints(frame, limits);
+        }
+        self.hints.clear();
         if self.candidates.capacity() < w * h {
             let additional = w * h - self.candidates.len();
             resident::reserve(&mut self.candidates, additional);
@@ -295,6 +320,67 @@ impl Workspace {
         self.instances[i] = Instance { alt_class_id: inst.alt_class_id, ..kept };
         self.instances.push(new);
         Some(self.instances.len() - 1)
+    }
+
+    /// Cuts to make in the next [`prepare`](Self::prepare) only (class
+    /// planes only; see [`CutHint`]); at most `max_instances` are kept. No
+    /// allocation.
+    pub fn set_cut_hints(&mut self, hints: &[CutHint]) {
+        self.hints.clear();
+        let room = self.hints.capacity();
+        self.hints.extend(hints.iter().take(room));
+    }
+
+    /// The component ids ([`Workspace::component_ids`]) of the two pieces
+    /// of each cut the last [`prepare`](Self::prepare) made from its hints.
+    pub fn hinted_pieces(&self) -> &[[u32; 2]] {
+        &self.hinted
+    }
+
+    /// Makes the hinted cuts whose two centres project onto (or within
+    /// [`HINT_REACH_PX`] of) one region of their class: a piece's centre can
+    /// lie off its own pixels (the notch of an L, the hole of a mug).
+    fn apply_hints(&mut self, frame: &FrameView<'_>, limits: InstanceLimits) {
+        let (w, h) = (frame.width(), frame.height());
+        for k in 0..self.hints.len() {
+            let hint = self.hints[k];
+            let pixels = hint.centres.map(|c| crate::split::project(frame, Some(&c)));
+            let ids = self.finder.component_ids();
+            let components = self.finder.components();
+            let of_class =
+                |id: u32| id != 0 && components.iter().any(|c| c.component_id == id && c.class_id == hint.class_id);
+            // The region of the hint's class nearest to a projected centre.
+            let region_at = |[u, v]: [f32; 2]| {
+                let (u, v) = (u.round() as i64, v.round() as i64);
+                let r = HINT_REACH_PX as i64;
+                let mut best: Option<(i64, u32)> = None;
+                for y in (v - r).max(0)..=(v + r).min(h as i64 - 1) {
+                    for x in (u - r).max(0)..=(u + r).min(w as i64 - 1) {
+                        let id = ids[y as usize * w + x as usize];
+                        let d = (x - u).pow(2) + (y - v).pow(2);
+                        if best.is_none_or(|(bd, _)| d < bd) && of_class(id) {
+                            best = Some((d, id));
+                        }
+                    }
+                }
+                best.map(|(_, id)| id)
+            };
+            let (Some(id), Some(other)) = (region_at(pixels[0]), region_at(pixels[1])) else { continue };
+            if id != other {
+                continue;
+            }
+            let new_id = self.finder.next_split_id();
+            let piece = |p: usize| {
+                let (u, v) = (p % w, p / w);
+                Some(match frame.depth.metres(p) {
+                    Some(z) => crate::split::nearest(&hint.centres, sampling::back_project(frame, u, v, z)),
+                    None => crate::split::nearest_2d(&pixels, [u as f32, v as f32]),
+                })
+            };
+            if self.finder.split(id, limits, piece) == 1 {
+                self.hinted.push([id, new_id]);
+            }
+        }
     }
 
     /// What the last [`prepare`](Self::prepare) skipped.

@@ -191,3 +191,134 @@ fn instance_planes_and_the_off_setting_are_left_alone() {
     let out = second_look(&view, RecutConfig::DEFAULT);
     assert_eq!((out.poses.len(), out.stats.tried), (1, 0), "a producer's instance is its own");
 }
+
+/// One camera's stream: the workspace, ICP, verifier and second look kept
+/// from frame to frame, the kept cuts passed on as the daemon does.
+struct Stream {
+    ws: Workspace,
+    icp: IcpEstimator,
+    pieces: IcpEstimator,
+    verifier: Verifier,
+    recut: Recut,
+    poses: PoseSet,
+    verdicts: Vec<Verification>,
+}
+
+impl Stream {
+    fn new() -> Self {
+        Self::with(RecutConfig::DEFAULT)
+    }
+
+    fn with(recut: RecutConfig) -> Self {
+        let objects = object_set(&[l_block()]);
+        let config = WorkspaceConfig { num_classes: 1, ..Default::default() };
+        let solids = Arc::new(Solids::new(&objects));
+        Self {
+            ws: Workspace::new(config).unwrap(),
+            icp: IcpEstimator::new(&objects, IcpConfig::default()).unwrap(),
+            pieces: IcpEstimator::new(&objects, IcpConfig::default()).unwrap(),
+            verifier: Verifier::new(&objects, VerifyConfig::default()),
+            recut: Recut::new(&objects, solids, config, recut).unwrap(),
+            poses: PoseSet::with_capacity(2 * config.max_instances),
+            verdicts: Vec::new(),
+        }
+    }
+
+    /// (instances before the estimate, the second look's stats).
+    fn frame(&mut self, frame: &SyntheticFrame, seed: u64) -> (usize, RecutStats) {
+        let view = frame.view();
+        self.ws.set_cut_hints(self.recut.hints());
+        let prepared = self.ws.prepare(&view, seed).unwrap();
+        self.icp.estimate(&view, &mut self.ws, &mut self.poses).unwrap();
+        self.verdicts.clear();
+        for p in self.poses.as_slice() {
+            let id = self.ws.component_id(p.instance_id as usize).unwrap();
+            let mask = MaskRef { ids: self.ws.component_ids(), id, bbox: p.bbox };
+            self.verdicts.push(self.verifier.verify(&view, mask, p));
+        }
+        let (ws, poses, verdicts) = (&mut self.ws, &mut self.poses, &mut self.verdicts);
+        let stats = self.recut.run(&view, ws, poses, verdicts, &mut self.pieces, &mut self.verifier, None, seed);
+        (prepared, stats.unwrap())
+    }
+
+    fn xs(&self) -> Vec<f64> {
+        let mut xs: Vec<f64> = self.poses.as_slice().iter().map(|p| p.translation.x).collect();
+        xs.sort_by(f64::total_cmp);
+        xs
+    }
+}
+
+#[test]
+fn a_kept_cut_is_made_again_in_the_next_frame_before_the_estimate() {
+    let l = l_block();
+    let mut stream = Stream::new();
+    let (prepared, stats) = stream.frame(&pair(&l), 7);
+    assert_eq!((prepared, stats.kept), (1, 1), "the second look separates the pair");
+    assert_eq!(stream.recut.hints().len(), 1);
+    // The pair 5 mm further right: cut before the estimate, both halves posed, the cut held again.
+    let shift = 0.005;
+    let moved = painted(render(&[
+        (1, &l, pose(10.0, [-0.04 + shift, 0.0, 0.5])),
+        (1, &l, pose(10.0, [0.04 + shift, 0.0, 0.5])),
+    ]));
+    let (prepared, stats) = stream.frame(&moved, 8);
+    assert_eq!(prepared, 2, "two instances enter the estimate");
+    assert_eq!(stream.ws.hinted_pieces().len(), 1);
+    assert_eq!((stats.carried, stats.kept), (1, 0));
+    for (x, truth) in stream.xs().iter().zip([-0.04 + shift, 0.04 + shift]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth:.3} m");
+    }
+    assert_eq!(stream.recut.hints().len(), 1, "and is carried on");
+}
+
+#[test]
+fn a_carried_cut_that_no_longer_holds_is_forgotten_and_one_pose_stays() {
+    let l = l_block();
+    let mut stream = Stream::new();
+    assert_eq!(stream.frame(&pair(&l), 7).1.kept, 1);
+    // One block where the pair stood: the carried cut halves it, the halves
+    // are one object by the depth image, and only one pose stays.
+    let single = painted(render(&[(1, &l, pose(10.0, [0.0, 0.0, 0.5]))]));
+    let (prepared, stats) = stream.frame(&single, 8);
+    assert_eq!(prepared, 2, "the stale cut was made");
+    assert_eq!((stats.carried, stream.poses.len()), (0, 1));
+    assert!(stream.recut.hints().is_empty(), "the cut is forgotten");
+    let (prepared, _) = stream.frame(&single, 9);
+    assert_eq!((prepared, stream.poses.len()), (1, 1), "the next frame is the block whole");
+}
+
+#[test]
+fn a_cut_without_time_for_its_pieces_is_deferred_to_the_next_frames_estimate() {
+    let l = l_block();
+    let mut stream = Stream::new();
+    stream.recut.defer_next_frame();
+    let (_, stats) = stream.frame(&pair(&l), 7);
+    assert_eq!((stats.tried, stats.deferred, stats.kept), (1, 1, 0), "cut, not estimated");
+    assert_eq!(stream.poses.len(), 1, "this frame keeps the region's pose");
+    assert_eq!(stream.recut.hints().len(), 1);
+    let (prepared, stats) = stream.frame(&pair(&l), 8);
+    assert_eq!((prepared, stats.carried), (2, 1), "the next frame estimates the pieces, and the cut holds");
+    for (x, truth) in stream.xs().iter().zip([-0.04, 0.04]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
+}
+
+#[test]
+fn a_deferred_cut_the_next_frame_refuses_is_not_deferred_again_for_a_while() {
+    // Every region qualifies; one block, deferred: the next frame halves it,
+    // the halves are one object, and that place is left whole for REFUSED_FRAMES.
+    let l = l_block();
+    let mut stream = Stream::with(RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT });
+    let single = painted(render(&[(1, &l, pose(10.0, [0.0, 0.0, 0.5]))]));
+    stream.recut.defer_next_frame();
+    assert_eq!(stream.frame(&single, 7).1.deferred, 1);
+    let (prepared, stats) = stream.frame(&single, 8);
+    assert_eq!((prepared, stats.carried, stream.poses.len()), (2, 0, 1), "refused: one pose stays");
+    for seed in 9..9 + fusepose_estimator::recut::REFUSED_FRAMES as u64 - 1 {
+        stream.recut.defer_next_frame();
+        let (prepared, stats) = stream.frame(&single, seed);
+        assert_eq!((prepared, stats.deferred), (1, 0), "frame {seed}: not deferred again yet");
+    }
+    stream.recut.defer_next_frame();
+    assert_eq!(stream.frame(&single, 40).1.deferred, 1, "after REFUSED_FRAMES it may be tried again");
+}
