@@ -447,8 +447,6 @@ pub struct PoseEngine {
     instance_classes: Vec<u16>,
     /// `estimator.recut`: the second look and the estimator of its pieces.
     recut: Option<(Recut, Box<dyn Estimator>)>,
-    /// Regions the second look cut in two in the last frame.
-    recut_kept: usize,
     /// Moving average of the second look's time per region looked at, ns.
     recut_ns_per_region: f64,
 }
@@ -666,7 +664,6 @@ impl PoseEngine {
             deadline: None,
             instance_classes: Vec::with_capacity(fusepose_estimator::seg::voting::MAX_INSTANCES + 1),
             recut,
-            recut_kept: 0,
             recut_ns_per_region: 0.0,
         })
     }
@@ -703,7 +700,6 @@ impl PoseEngine {
             deadline: None,
             instance_classes: Vec::new(),
             recut: None,
-            recut_kept: 0,
             recut_ns_per_region: 0.0,
         })
     }
@@ -795,7 +791,6 @@ impl PoseEngine {
                     frame,
                     &mut self.duplicate_marks,
                 );
-                self.recut_kept = 0;
                 let recut_start = fusepose_client::monotonic_ns();
                 if let (Some((recut, pieces)), Some(verifier), Some(ws)) =
                     (self.recut.as_mut(), self.verifier.as_mut(), self.workspace.as_mut())
@@ -828,7 +823,6 @@ impl PoseEngine {
                         seed,
                     ) {
                         Ok(stats) => {
-                            self.recut_kept = stats.kept + stats.carried;
                             if stats.tried > 0 && stats.deferred == 0 {
                                 let ns = (fusepose_client::monotonic_ns() - recut_start) as f64 / stats.tried as f64;
                                 self.recut_ns_per_region = match self.recut_ns_per_region {
