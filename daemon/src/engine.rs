@@ -792,6 +792,7 @@ impl PoseEngine {
                     &mut self.duplicate_marks,
                 );
                 let recut_start = fusepose_client::monotonic_ns();
+                let mut recut_tried = 0;
                 if let (Some((recut, pieces)), Some(verifier), Some(ws)) =
                     (self.recut.as_mut(), self.verifier.as_mut(), self.workspace.as_mut())
                 {
@@ -811,32 +812,23 @@ impl PoseEngine {
                             n => recut.limit_next_frame(n),
                         }
                     }
-                    let poses = &mut self.poses;
-                    match recut.run(
-                        frame,
-                        ws,
-                        poses,
-                        &mut self.verdicts,
-                        pieces.as_mut(),
-                        verifier,
-                        seg.as_deref(),
-                        seed,
-                    ) {
-                        Ok(stats) => {
-                            if stats.tried > 0 && stats.deferred == 0 {
-                                let ns = (fusepose_client::monotonic_ns() - recut_start) as f64 / stats.tried as f64;
-                                self.recut_ns_per_region = match self.recut_ns_per_region {
-                                    0.0 => ns,
-                                    old => old + POST_ESTIMATE_GAIN * (ns - old),
-                                };
-                            }
-                        }
+                    let (poses, verdicts, seg) = (&mut self.poses, &mut self.verdicts, seg.as_deref());
+                    match recut.run(frame, ws, poses, verdicts, pieces.as_mut(), verifier, seg, seed) {
+                        Ok(stats) => recut_tried = if stats.deferred == 0 { stats.tried } else { 0 },
                         Err(e) => {
                             tracing::debug!(error = %e, "second look at a region failed; the region keeps its pose")
                         }
                     }
                 }
                 let recut_ns = fusepose_client::monotonic_ns() - recut_start;
+                // Its cost per region estimated (not deferred) sizes the next frames' second look.
+                if recut_tried > 0 {
+                    let ns = recut_ns as f64 / recut_tried as f64;
+                    self.recut_ns_per_region = match self.recut_ns_per_region {
+                        0.0 => ns,
+                        old => old + POST_ESTIMATE_GAIN * (ns - old),
+                    };
+                }
                 drop(seg);
                 self.rejected = if self.verify_drop { self.failed_verification } else { 0 };
                 drop_explained(

@@ -38,7 +38,7 @@ use fusepose_scene::ObjectSet;
 use crate::frame::{FrameView, LabelPlane};
 use crate::poses::{ObjectPose, PoseSet};
 use crate::seg::SegEngine;
-use crate::split::{kmeans, nearest, nearest_2d, project};
+use crate::split::{kmeans, nearest_piece, project};
 use crate::verify::{MaskRef, Verification, Verifier};
 use crate::workspace::{CutHint, Workspace, WorkspaceConfig, WorkspaceConfigError};
 use crate::{EstimateError, Estimator};
@@ -54,8 +54,6 @@ pub const REFUSED_FRAMES: u32 = 24;
 struct Refused {
     class_id: u16,
     midpoint: [f32; 3],
-    /// Distance within which a new cut counts as the same, metres.
-    reach: f32,
     frames: u32,
 }
 
@@ -116,7 +114,6 @@ struct Candidate {
     /// Index of the region's pose in the frame's poses.
     pose: usize,
     coverage: f32,
-    class_id: u16,
 }
 
 /// Cuts, estimates and judges regions again; see the module doc.
@@ -186,10 +183,6 @@ impl Recut {
             refused: Vec::with_capacity(ws_config.max_instances),
             carried: Vec::with_capacity(ws_config.max_instances),
         })
-    }
-
-    pub fn config(&self) -> &RecutConfig {
-        &self.config
     }
 
     /// The cuts that stood in the last [`Recut::run`]: the second look's
@@ -269,24 +262,37 @@ impl Recut {
         if self.defer.take().is_some() {
             // No time for the pieces now: the next frame's own estimate
             // poses them, and `check_hinted` judges the cut there.
-            stats.deferred = self.defer_cuts();
+            stats.deferred = self.defer_cuts(poses.as_slice());
             return Ok(stats);
         }
-        // Out of `self` while the view borrows them (no allocation).
+        stats.kept = self.estimate_pieces(frame, estimator, seed, |this, view, ids| {
+            this.verify(view, verifier, segmenter);
+            this.apply(frame, view, verifier, ids, ws, poses, verdicts)
+        })?;
+        Ok(stats)
+    }
+
+    /// Prepares the piece plane's instances in the second workspace and
+    /// estimates them into `self.poses`, then runs `then` with the plane's
+    /// view and ids (taken out of `self` while the view borrows them; no
+    /// allocation).
+    fn estimate_pieces<R>(
+        &mut self,
+        frame: &FrameView<'_>,
+        estimator: &mut dyn Estimator,
+        seed: u64,
+        then: impl FnOnce(&mut Self, &FrameView<'_>, &[u16]) -> R,
+    ) -> Result<R, EstimateError> {
         let (ids, classes) = (std::mem::take(&mut self.ids), std::mem::take(&mut self.classes));
         let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..*frame };
         let estimated = self
             .ws
             .prepare(&view, seed)
             .map_err(EstimateError::Frame)
-            .and_then(|_| estimator.estimate(&view, &mut self.ws, &mut self.poses));
-        if estimated.is_ok() {
-            self.verify(&view, verifier, segmenter);
-            stats.kept = self.apply(frame, &view, verifier, &ids, ws, poses, verdicts);
-        }
+            .and_then(|_| estimator.estimate(&view, &mut self.ws, &mut self.poses))
+            .map(|()| then(self, &view, &ids));
         (self.ids, self.classes) = (ids, classes);
-        estimated?;
-        Ok(stats)
+        estimated
     }
 
     /// Once per frame size: sizes the piece plane, and estimates a square
@@ -310,14 +316,7 @@ impl Recut {
             self.ids[v * w + u0..v * w + u0 + side].fill(1);
         }
         self.classes[1] = 1;
-        let (ids, classes) = (std::mem::take(&mut self.ids), std::mem::take(&mut self.classes));
-        let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..*frame };
-        let warmed = self
-            .ws
-            .prepare(&view, seed)
-            .map_err(EstimateError::Frame)
-            .and_then(|_| estimator.estimate(&view, &mut self.ws, &mut self.poses));
-        (self.ids, self.classes) = (ids, classes);
+        let warmed = self.estimate_pieces(frame, estimator, seed, |_, _, _| ());
         for v in v0..v0 + side {
             self.ids[v * w + u0..v * w + u0 + side].fill(0);
         }
@@ -368,8 +367,7 @@ impl Recut {
                 if self.refused.len() < self.refused.capacity() {
                     let (ta, tb) = (pa.translation, pb.translation);
                     let midpoint = [(ta.x + tb.x) as f32 / 2.0, (ta.y + tb.y) as f32 / 2.0, (ta.z + tb.z) as f32 / 2.0];
-                    let side = self.sides.get(pa.class_id as usize - 1).copied().unwrap_or(0.0);
-                    self.refused.push(Refused { class_id: pa.class_id, midpoint, reach: side, frames: REFUSED_FRAMES });
+                    self.refused.push(Refused { class_id: pa.class_id, midpoint, frames: REFUSED_FRAMES });
                 }
             }
         }
@@ -382,14 +380,15 @@ impl Recut {
 
     /// Carries this frame's cuts to the next untried, except near a cut
     /// refused lately; returns how many.
-    fn defer_cuts(&mut self) -> usize {
+    fn defer_cuts(&mut self, poses: &[ObjectPose]) -> usize {
         let mut deferred = 0;
         for (j, c) in self.candidates.iter().enumerate() {
-            let (centres, class_id) = (self.centres[j], c.class_id);
+            let (centres, class_id) = (self.centres[j], poses[c.pose].class_id);
             let mid = [0, 1, 2].map(|k| (centres[0][k] + centres[1][k]) / 2.0);
+            // The same place: within the object's smallest side.
+            let reach = self.sides.get(class_id as usize - 1).copied().unwrap_or(0.0);
             let near = |r: &Refused| {
-                r.class_id == class_id
-                    && (0..3).map(|k| (r.midpoint[k] - mid[k]).powi(2)).sum::<f32>() < r.reach * r.reach
+                r.class_id == class_id && (0..3).map(|k| (r.midpoint[k] - mid[k]).powi(2)).sum::<f32>() < reach * reach
             };
             if self.refused.iter().any(near) || self.carried.len() >= self.carried.capacity() {
                 continue;
@@ -409,7 +408,7 @@ impl Recut {
             // whose pose failed is more often another object taken for this
             // class, and its pieces' poses fit a small model anywhere.
             if v.passed && coverage < self.config.max_coverage && poses[k].class_id as usize <= self.sides.len() {
-                self.candidates.push(Candidate { pose: k, coverage, class_id: poses[k].class_id });
+                self.candidates.push(Candidate { pose: k, coverage });
             }
         }
         self.candidates.sort_unstable_by(|a, b| a.coverage.total_cmp(&b.coverage));
@@ -452,14 +451,11 @@ impl Recut {
                 .flat_map(|v| (u0..=u1).map(move |u| (u, v)))
                 .filter_map(|(u, v)| {
                     let p = v * w + u;
-                    frame
-                        .depth
-                        .metres(p)
-                        .filter(|_| in_region(p))
-                        .map(|z| crate::sampling::back_project(frame, u, v, z))
+                    frame.depth.metres(p).filter(|_| in_region(p)).map(|z| (u, v, z))
                 })
                 .step_by(stride)
-                .take(SAMPLES);
+                .take(SAMPLES)
+                .map(|(u, v, z)| crate::sampling::back_project(frame, u, v, z));
             self.samples.extend(points);
             let n = self.samples.len();
             let centres = kmeans(&self.samples, 2, &mut self.cluster[..n], &mut self.order);
@@ -477,10 +473,7 @@ impl Recut {
                     if !in_region(p) {
                         continue;
                     }
-                    let piece = match frame.depth.metres(p) {
-                        Some(z) => nearest(&centres, crate::sampling::back_project(frame, u, v, z)),
-                        None => nearest_2d(&pixels, [u as f32, v as f32]),
-                    };
+                    let piece = nearest_piece(frame, &centres, &pixels, p);
                     self.ids[p] = base + 1 + piece as u16;
                 }
             }

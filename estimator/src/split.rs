@@ -143,14 +143,7 @@ impl RegionSplitter {
             let centres = self.refine(frame, centres, k);
             let centres = &centres[..k];
             let pixels: [[f32; 2]; MAX_PIECES] = std::array::from_fn(|i| project(frame, centres.get(i)));
-            let w = frame.width();
-            let piece = |p: usize| {
-                let (u, v) = (p % w, p / w);
-                match frame.depth.metres(p) {
-                    Some(z) => nearest(centres, back_project(frame, u, v, z)),
-                    None => nearest_2d(&pixels[..k], [u as f32, v as f32]),
-                }
-            };
+            let piece = |p: usize| nearest_piece(frame, centres, &pixels[..k], p);
             if !self.same_colours(frame, k, &piece) {
                 continue;
             }
@@ -487,8 +480,20 @@ pub(crate) fn nearest(centres: &[[f32; 3]], p: [f32; 3]) -> usize {
     (0..centres.len()).min_by(|&a, &b| dist2(&centres[a], &p).total_cmp(&dist2(&centres[b], &p))).unwrap_or(0)
 }
 
+/// The piece of pixel `p` in a cut between `centres` (their projections
+/// `pixels`): the nearest centre in 3D where the pixel has depth, else the
+/// nearest projected centre in the image.
+pub(crate) fn nearest_piece(frame: &FrameView<'_>, centres: &[[f32; 3]], pixels: &[[f32; 2]], p: usize) -> usize {
+    let w = frame.width();
+    let (u, v) = (p % w, p / w);
+    match frame.depth.metres(p) {
+        Some(z) => nearest(centres, back_project(frame, u, v, z)),
+        None => nearest_2d(pixels, [u as f32, v as f32]),
+    }
+}
+
 /// Index of the projected centre nearest to pixel `uv`.
-pub(crate) fn nearest_2d(pixels: &[[f32; 2]], uv: [f32; 2]) -> usize {
+fn nearest_2d(pixels: &[[f32; 2]], uv: [f32; 2]) -> usize {
     let d = |c: &[f32; 2]| (c[0] - uv[0]).powi(2) + (c[1] - uv[1]).powi(2);
     (0..pixels.len()).min_by(|&a, &b| d(&pixels[a]).total_cmp(&d(&pixels[b]))).unwrap_or(0)
 }

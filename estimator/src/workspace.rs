@@ -102,8 +102,9 @@ impl Instance {
 pub const HINT_REACH_PX: usize = 12;
 
 /// A cut to make in the next [`Workspace::prepare`]: the region of class
-/// `class_id` that holds the projections of both `centres` (camera frame,
-/// metres) is cut between them, each pixel to its nearer centre. The
+/// `class_id` nearest to the projections of both `centres` (camera frame,
+/// metres; within [`HINT_REACH_PX`]) is cut between them, each pixel to its
+/// nearer centre. The
 /// daemon carries a cut kept in one frame to the next this way
 /// ([`crate::recut`]), so the pieces enter that frame's own estimate.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -370,13 +371,7 @@ impl Workspace {
                 continue;
             }
             let new_id = self.finder.next_split_id();
-            let piece = |p: usize| {
-                let (u, v) = (p % w, p / w);
-                Some(match frame.depth.metres(p) {
-                    Some(z) => crate::split::nearest(&hint.centres, sampling::back_project(frame, u, v, z)),
-                    None => crate::split::nearest_2d(&pixels, [u as f32, v as f32]),
-                })
-            };
+            let piece = |p: usize| Some(crate::split::nearest_piece(frame, &hint.centres, &pixels, p));
             if self.finder.split(id, limits, piece) == 1 {
                 self.hinted.push([id, new_id]);
             }
