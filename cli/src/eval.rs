@@ -29,6 +29,7 @@ mod dataset;
 mod instances;
 mod masks;
 mod per_object;
+mod variants;
 
 use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
@@ -38,7 +39,7 @@ use anyhow::Context;
 use fusepose_estimator::alternates;
 use fusepose_estimator::net::{NetEstimator, NetOptions};
 use fusepose_estimator::seg::SegEngine;
-use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
+use fusepose_estimator::verify::{Verifier, VerifyConfig};
 use fusepose_estimator::{
     ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
     WorkspaceConfig,
@@ -166,6 +167,12 @@ pub struct Args {
     /// Base seed of each frame's randomness, e.g. point sampling (frame i uses seed + i).
     #[arg(long, default_value_t = 0)]
     pub seed: u64,
+    /// Evaluate with this many sampling seeds (`--seed`, `--seed` + 1, …) and
+    /// end with each run's mean ± standard deviation over them: one seed is
+    /// one draw of the point sampling, and single runs differ by up to a few
+    /// points of ADD(S) between seeds. Judge changes on several.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..=100))]
+    pub seeds: u32,
     /// Evaluate only the first N frames.
     #[arg(long)]
     pub limit: Option<usize>,
@@ -221,6 +228,11 @@ pub struct Args {
     /// apart as two copies (0 = off), as the daemon's `estimator.recut`.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.max_coverage)]
     pub recut: f32,
+    /// Metres: an instance's pixels within this height of the plane the
+    /// objects stand on (fitted to the background) are left out of its
+    /// points (0 = off), as the daemon's `estimator.support_floor`.
+    #[arg(long, default_value_t = fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M)]
+    pub support_floor: f32,
     /// `--recut`: how far apart the pieces' poses must be, × the object's smallest side.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_separation)]
     pub recut_separation: f32,
@@ -284,7 +296,7 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    cast::run_each(args, run_cast)
+    variants::run_each(args, run_cast)
 }
 
 /// Applies `--symmetry`, then (for the network) the weight file's symmetries
@@ -556,7 +568,11 @@ impl Runner {
         let (estimator, config): (Box<dyn Estimator>, WorkspaceConfig) = match kind {
             EstimatorKind::Icp => (
                 Box::new(IcpEstimator::new(objects, IcpConfig::default())?),
-                WorkspaceConfig { max_instances: args.max_instances, ..WorkspaceConfig::default() },
+                WorkspaceConfig {
+                    max_instances: args.max_instances,
+                    support_floor_m: args.support_floor,
+                    ..WorkspaceConfig::default()
+                },
             ),
             EstimatorKind::Net => {
                 let weights = crate::weights::resolve_weights(args.weights.as_deref())?;
@@ -565,6 +581,7 @@ impl Runner {
                     .with_context(|| format!("loading {}", weights.display()))?;
                 let mut config = net.workspace_config(args.max_instances);
                 config.num_points = args.points.unwrap_or(config.num_points);
+                config.support_floor_m = args.support_floor;
                 let recut_config = fusepose_estimator::recut::RecutConfig {
                     max_coverage: args.recut,
                     min_separation: args.recut_separation,
@@ -581,6 +598,7 @@ impl Runner {
         };
         let mut workspace = Workspace::new(WorkspaceConfig { num_classes, ..config })?;
         workspace.join_parts(&fusepose_estimator::parts::extents(objects, args.join_parts));
+        workspace.support_floors(&fusepose_estimator::support::class_floors(objects, args.support_floor));
         workspace.split_regions(cut_limits);
         let csv = match &args.csv {
             None => None,
@@ -782,7 +800,7 @@ impl Runner {
             .iter()
             .map(|p| {
                 ws.component_id(p.instance_id as usize).map(|id| {
-                    let mask = MaskRef { ids: ws.component_ids(), id, bbox: p.bbox };
+                    let mask = ws.mask_ref(id, p.bbox);
                     let mut v = verifier.verify(view, mask, p);
                     // Only the built-in segmenter's regions carry a class probability.
                     if let Some(seg) = seg {
@@ -927,9 +945,7 @@ impl Runner {
     fn suppress_explained(&mut self, view: &FrameView<'_>) {
         let Some(verifier) = self.verifier.as_mut() else { return };
         let ws = &self.workspace;
-        let mask_of = |p: &ObjectPose| {
-            ws.component_id(p.instance_id as usize).map(|id| MaskRef { ids: ws.component_ids(), id, bbox: p.bbox })
-        };
+        let mask_of = |p: &ObjectPose| ws.component_id(p.instance_id as usize).map(|id| ws.mask_ref(id, p.bbox));
         let mut dropped = Vec::new();
         self.explained += fusepose_estimator::explained::suppress(
             verifier,

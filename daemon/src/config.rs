@@ -173,6 +173,12 @@ pub struct EstimatorConfig {
     pub max_instances: usize,
     /// Smallest instance mask kept, pixels.
     pub min_pixels: usize,
+    /// Metres: an instance's pixels lying within this height of the surface
+    /// the objects stand on (a plane fitted to the frame's background) are
+    /// not its points: a mask that bled onto the table, a shadow or a table
+    /// texture taken for an object. 0 = off
+    /// (`fusepose_estimator::WorkspaceConfig::support_floor_m`).
+    pub support_floor: f32,
     /// Refinement iterations (ICP iterations or refiner passes).
     pub refine_iterations: usize,
     /// Threads per frame for estimation: the network uses up to 2 (the loop
@@ -363,6 +369,7 @@ impl Default for EstimatorConfig {
             crop_size: None,
             max_instances: 8,
             min_pixels: 50,
+            support_floor: fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M,
             refine_iterations: 2,
             worker_threads: None,
             masks: MaskSource::Auto,
@@ -602,6 +609,13 @@ impl DaemonConfig {
                 "must be in 0.05..=1 (1 = off)",
             ));
         }
+        if !(e.support_floor.is_finite() && (0.0..=0.05).contains(&e.support_floor)) {
+            return Err(invalid(
+                "estimator.support_floor",
+                e.support_floor,
+                "must be in 0..=0.05 metres (0 = off; 0.004 is the default, not 4 mm written as 4)",
+            ));
+        }
         if !(e.duplicates.is_finite() && (0.0..=2.0).contains(&e.duplicates)) {
             return Err(invalid("estimator.duplicates", e.duplicates, "must be in 0..=2 (0 = off)"));
         }
@@ -782,6 +796,16 @@ mod tests {
         assert_eq!(off.estimator.verify_min_region_probability, 0.0);
         let err = DaemonConfig::parse("[estimator]\nverify_min_region_probability = 1.2\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.verify_min_region_probability") && err.contains("0..=1"), "{err}");
+    }
+
+    #[test]
+    fn support_floor_is_metres_and_checked() {
+        let default = DaemonConfig::parse("").unwrap().estimator.support_floor;
+        assert_eq!(default, fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M);
+        assert_eq!(DaemonConfig::parse("[estimator]\nsupport_floor = 0\n").unwrap().estimator.support_floor, 0.0);
+        // 4 (millimetres written as metres) would clear every object lower than 4 m.
+        let err = DaemonConfig::parse("[estimator]\nsupport_floor = 4\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.support_floor") && err.contains("metres"), "{err}");
     }
 
     #[test]

@@ -12,7 +12,7 @@ use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile
 use fusepose_estimator::recut::{Recut, RecutConfig};
 use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine, SegError, SegFile, VotingMode};
 use fusepose_estimator::split::CutLimits;
-use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
+use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{
     EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
     Workspace, WorkspaceConfig,
@@ -44,6 +44,10 @@ pub struct EngineSpec {
     /// many metres of each other are one instance (`estimator.join_parts`);
     /// empty = never join.
     pub part_extents: Vec<f32>,
+    /// Per class (id − 1): the support floor (`estimator.support_floor`,
+    /// lower for thin objects: `fusepose_estimator::support::class_floors`);
+    /// empty = the workspace's one floor for all.
+    pub support_floors: Vec<f32>,
     /// Per class: when a region holds several copies and is cut
     /// (`estimator.split_regions`); empty extents = never cut.
     pub cut_limits: CutLimits,
@@ -109,6 +113,7 @@ fn workspace_config(config: &EstimatorConfig, objects: &ObjectSet) -> WorkspaceC
         crop_size: config.crop_size.unwrap_or(ICP_CROP_SIZE),
         min_pixels: config.min_pixels,
         num_classes: objects.len().min(u16::MAX as usize) as u16,
+        support_floor_m: config.support_floor,
         ..WorkspaceConfig::default()
     }
 }
@@ -193,6 +198,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
         }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
+        spec.support_floors = fusepose_estimator::support::class_floors(&objects, config.support_floor);
         spec.cut_limits = CutLimits::new(&objects, config.split_regions);
         spec.separations = fusepose_estimator::duplicates::separations(&objects, config.duplicates);
         spec.max_explained = config.max_explained_share;
@@ -252,6 +258,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
+            support_floors: Vec::new(),
             cut_limits: CutLimits::default(),
             separations: Vec::new(),
             interpenetration: None,
@@ -277,6 +284,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             min_confidence: 0.0,
             verify: None,
             part_extents: Vec::new(),
+            support_floors: Vec::new(),
             cut_limits: CutLimits::default(),
             separations: Vec::new(),
             interpenetration: None,
@@ -329,6 +337,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
     let own = probe.workspace_config(config.max_instances);
     let workspace = WorkspaceConfig {
         min_pixels: config.min_pixels,
+        support_floor_m: config.support_floor,
         num_points: config.num_points.unwrap_or(own.num_points),
         crop_size: config.crop_size.unwrap_or(own.crop_size),
         ..own
@@ -370,6 +379,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         min_confidence: 0.0,
         verify: None,
         part_extents: Vec::new(),
+        support_floors: Vec::new(),
         cut_limits: CutLimits::default(),
         separations: Vec::new(),
         interpenetration: None,
@@ -480,7 +490,7 @@ fn verify_poses(
     for pose in poses.as_slice() {
         let v = match ws.component_id(pose.instance_id as usize) {
             Some(id) => {
-                let mask = MaskRef { ids: ws.component_ids(), id, bbox: pose.bbox };
+                let mask = ws.mask_ref(id, pose.bbox);
                 let mut v = verifier.verify(frame, mask, pose);
                 if let Some(seg) = segmenter.filter(|_| min_region_probability > 0.0) {
                     v.judge_region_probability(
@@ -550,9 +560,7 @@ fn drop_explained(
         return;
     }
     rank(poses, verdicts, scores);
-    let mask_of = |p: &ObjectPose| {
-        ws.component_id(p.instance_id as usize).map(|id| MaskRef { ids: ws.component_ids(), id, bbox: p.bbox })
-    };
+    let mask_of = |p: &ObjectPose| ws.component_id(p.instance_id as usize).map(|id| ws.mask_ref(id, p.bbox));
     let dropped = fusepose_estimator::explained::suppress(verifier, frame, mask_of, poses, max_share, scores, marks);
     forget_dropped(dropped, verdicts, marks);
 }
@@ -609,6 +617,7 @@ impl PoseEngine {
             Some(_) => {
                 let mut ws = Workspace::new(workspace_config).map_err(|e| anyhow::anyhow!("estimator: {e}"))?;
                 ws.join_parts(&spec.part_extents);
+                ws.support_floors(&spec.support_floors);
                 ws.split_regions(&spec.cut_limits);
                 Some(ws)
             }

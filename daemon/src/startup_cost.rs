@@ -99,8 +99,11 @@ impl StartupCost {
     }
 }
 
+/// Height of the synthetic frame's objects above its plane, 0.1 mm units.
+const OBJECT_HEIGHT_UNITS: u16 = 400;
+
 /// A 640×480 frame with `objects` labelled rectangles (classes 1..=objects)
-/// on a tilted plane 0.6–0.9 m away, textured colour.
+/// standing 4 cm proud of a tilted plane 0.6–0.9 m away, textured colour.
 pub struct SyntheticFrame {
     intrinsics: Intrinsics,
     color: Vec<u8>,
@@ -113,12 +116,15 @@ impl SyntheticFrame {
         let intrinsics = Intrinsics::YCB_VIDEO;
         let (w, h) = (intrinsics.width as usize, intrinsics.height as usize);
         let color = (0..w * h * 3).map(|i| ((i * 7919) % 251) as u8).collect();
-        let depth = (0..w * h).map(|i| 6000 + (i / w) as u16 * 6).collect(); // 0.1 mm units
+        let mut depth: Vec<u16> = (0..w * h).map(|i| 6000 + (i / w) as u16 * 6).collect(); // 0.1 mm units
         let mut labels = vec![0u16; w * h];
         for k in 0..objects {
             let (u0, v0) = (30 + 150 * (k % 4), 40 + 140 * (k / 4 % 3));
             for v in v0..v0 + 110 {
                 labels[v * w + u0..v * w + u0 + 120].fill(k as u16 + 1);
+                // Each object stands 4 cm proud of the plane: one lying in it
+                // is the table to the support floor, and would not be measured.
+                depth[v * w + u0..v * w + u0 + 120].iter_mut().for_each(|z| *z -= OBJECT_HEIGHT_UNITS);
             }
         }
         Self { intrinsics, color, depth, labels }
@@ -158,8 +164,8 @@ pub fn measure_net(net: &mut NetEstimator, workspace: WorkspaceConfig) -> Result
         let t1 = Instant::now();
         net.estimate(&view, &mut ws, &mut poses).map_err(|e| format!("estimate failed: {e}"))?;
         let t2 = Instant::now();
-        if found == 0 {
-            return Err("no instance found in the synthetic frame".into());
+        if found < objects {
+            return Err(format!("the synthetic frame gave {found} of its {objects} instances"));
         }
         if i >= WARM_UP_FRAMES {
             prepare.push((t1 - t0).as_nanos() as f64 / found as f64);
@@ -264,6 +270,15 @@ mod tests {
         ids.sort_unstable();
         ids.dedup();
         assert_eq!(ids, [0, 1, 2, 3]);
-        assert!(f.depth.iter().all(|&d| (6000..9000).contains(&d)));
+        assert!(f.depth.iter().all(|&d| (5000..9000).contains(&d)));
+        // With the daemon's support floor every object still has its points.
+        let config = WorkspaceConfig {
+            num_classes: 3,
+            support_floor_m: fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M,
+            ..WorkspaceConfig::default()
+        };
+        let mut ws = Workspace::new(config).unwrap();
+        assert_eq!(ws.prepare(&view, 0).unwrap(), 3);
+        assert!(ws.support_plane().is_some(), "the plane behind them is found");
     }
 }

@@ -25,6 +25,7 @@ pub mod resident;
 pub mod sampling;
 pub mod seg;
 pub mod split;
+pub mod support;
 pub mod tracking;
 pub mod verify;
 pub mod workspace;

@@ -161,7 +161,8 @@ impl Recut {
         config: RecutConfig,
     ) -> Result<Self, WorkspaceConfigError> {
         let regions = config.max_regions.max(1);
-        let ws = Workspace::new(WorkspaceConfig { max_instances: 2 * regions, ..ws_config })?;
+        let mut ws = Workspace::new(WorkspaceConfig { max_instances: 2 * regions, ..ws_config })?;
+        ws.support_floors(&crate::support::class_floors(objects, ws_config.support_floor_m));
         Ok(Self {
             config,
             solids,
@@ -346,9 +347,7 @@ impl Recut {
                 |id: u32| poses.as_slice().iter().position(|p| ws.component_id(p.instance_id as usize) == Some(id));
             let (Some(a), Some(b)) = (find(ida), find(idb)) else { continue };
             let (pa, pb) = (poses.as_slice()[a], poses.as_slice()[b]);
-            let ids = ws.component_ids();
-            let ma = MaskRef { ids, id: ida, bbox: pa.bbox };
-            let mb = MaskRef { ids, id: idb, bbox: pb.bbox };
+            let (ma, mb) = (ws.mask_ref(ida, pa.bbox), ws.mask_ref(idb, pb.bbox));
             if terms.two_copies(view, verifier, (&pa, &verdicts[a], ma), (&pb, &verdicts[b], mb)) {
                 let centre = |i: usize| {
                     let inst = ws.instances[i];
@@ -494,7 +493,7 @@ impl Recut {
         for pose in self.poses.as_slice() {
             let v = match self.ws.component_id(pose.instance_id as usize) {
                 Some(id) => {
-                    let mask = MaskRef { ids: self.ws.component_ids(), id, bbox: pose.bbox };
+                    let mask = self.ws.mask_ref(id, pose.bbox);
                     let mut v = verifier.verify(view, mask, pose);
                     if let Some(seg) = segmenter.filter(|_| min_region_probability > 0.0) {
                         v.judge_region_probability(
@@ -520,9 +519,8 @@ impl Recut {
     fn pieces_are_two_copies(&mut self, j: usize, view: &FrameView<'_>, verifier: &mut Verifier) -> bool {
         let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { return false };
         let (pa, pb) = (self.poses.as_slice()[a], self.poses.as_slice()[b]);
-        let ids = self.ws.component_ids();
-        let ma = MaskRef { ids, id: (2 * j + 1) as u32, bbox: pa.bbox };
-        let mb = MaskRef { ids, id: (2 * j + 2) as u32, bbox: pb.bbox };
+        let ma = self.ws.mask_ref((2 * j + 1) as u32, pa.bbox);
+        let mb = self.ws.mask_ref((2 * j + 2) as u32, pb.bbox);
         let terms = Terms { config: &self.config, sides: &self.sides, solids: &self.solids };
         terms.two_copies(view, verifier, (&pa, &self.verdicts[a], ma), (&pb, &self.verdicts[b], mb))
     }

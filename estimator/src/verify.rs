@@ -190,7 +190,8 @@ pub struct Verification {
     pub passed: bool,
 }
 
-/// Which pixels belong to the instance: `ids[p] == id`.
+/// Which pixels belong to the instance: `ids[p] == id` (a workspace's
+/// region: [`crate::Workspace::mask_ref`]).
 #[derive(Clone, Copy, Debug)]
 pub struct MaskRef<'a> {
     pub ids: &'a [u32],

@@ -21,6 +21,9 @@ use crate::parts::PartJoiner;
 use crate::resident;
 use crate::sampling;
 use crate::split::{CutLimits, RegionSplitter};
+use crate::support::{self, SupportPlane};
+use crate::verify::MaskRef;
+use nalgebra::Vector3;
 
 /// Sizes fixed at start-up; buffers are allocated once from them.
 ///
@@ -42,6 +45,12 @@ pub struct WorkspaceConfig {
     pub crop_margin: f32,
     /// Instances with fewer valid-depth pixels than this are dropped (counted).
     pub min_valid_depth: usize,
+    /// Pixels lying within this height (metres) of the surface the objects
+    /// stand on ([`crate::support`], fitted to the background) are not an
+    /// instance's points: a mask that bled onto the table, a shadow or a
+    /// table texture taken for an object. 0 (the library default) = off; the
+    /// daemon and `fusepose eval` use [`DEFAULT_SUPPORT_FLOOR_M`].
+    pub support_floor_m: f32,
 }
 
 impl Default for WorkspaceConfig {
@@ -54,9 +63,15 @@ impl Default for WorkspaceConfig {
             num_classes: 0,
             crop_margin: 0.15,
             min_valid_depth: 10,
+            support_floor_m: 0.0,
         }
     }
 }
+
+/// The support floor the daemon and `fusepose eval` use (metres): chosen on
+/// the tuning splits over five sampling seeds (docs/BENCHMARKS.md, "Session
+/// 25"); 6 mm added ghosts on the YCB renders.
+pub const DEFAULT_SUPPORT_FLOOR_M: f32 = 0.004;
 
 /// Why a [`WorkspaceConfig`] was refused.
 #[derive(Clone, Debug, PartialEq, thiserror::Error)]
@@ -69,6 +84,8 @@ pub enum WorkspaceConfigError {
     CropSize(usize),
     #[error("crop_margin must be finite and >= 0, got {0}")]
     CropMargin(f32),
+    #[error("support_floor_m must be finite and >= 0 (metres), got {0}")]
+    SupportFloor(f32),
 }
 
 /// One instance found in the label plane.
@@ -154,7 +171,18 @@ pub struct Workspace {
     hints: Vec<CutHint>,
     hinted: Vec<[u32; 2]>,
     stats: PrepareStats,
+    /// Background points the support plane is fitted to, and the plane of the
+    /// current frame (`None`: off, or no plane found).
+    support_points: Vec<Vector3<f32>>,
+    support: Option<SupportPlane>,
+    /// Per class (id − 1): its support floor ([`Workspace::support_floors`]);
+    /// empty = `config.support_floor_m` for all.
+    class_floors: Vec<f32>,
 }
+
+/// The support plane is fitted to every this-many-th background pixel in
+/// each direction.
+const SUPPORT_STRIDE: usize = 8;
 
 impl Workspace {
     /// Allocates every buffer for `config`.
@@ -170,6 +198,9 @@ impl Workspace {
         }
         if !(config.crop_margin.is_finite() && config.crop_margin >= 0.0) {
             return Err(WorkspaceConfigError::CropMargin(config.crop_margin));
+        }
+        if !(config.support_floor_m.is_finite() && config.support_floor_m >= 0.0) {
+            return Err(WorkspaceConfigError::SupportFloor(config.support_floor_m));
         }
         let (m, n, s) = (config.max_instances, config.num_points, config.crop_size);
         Ok(Self {
@@ -188,6 +219,9 @@ impl Workspace {
             hints: Vec::with_capacity(m),
             hinted: Vec::with_capacity(m),
             stats: PrepareStats::default(),
+            support_points: Vec::new(),
+            support: None,
+            class_floors: Vec::new(),
         })
     }
 
@@ -228,6 +262,7 @@ impl Workspace {
             let additional = w * h - self.candidates.len();
             resident::reserve(&mut self.candidates, additional);
         }
+        self.fit_support(frame, &labels);
         let mut rng = Pcg64Mcg::seed_from_u64(frame_seed);
         for k in 0..self.finder.components().len() {
             let component = self.finder.components()[k];
@@ -254,6 +289,14 @@ impl Workspace {
     /// Allocates; call it at start-up, not per frame.
     pub fn split_regions(&mut self, limits: &CutLimits) {
         self.splitter = (!limits.extents.is_empty()).then(|| RegionSplitter::new(limits, self.config.max_instances));
+    }
+
+    /// From the next frame on, the support floor of class id k + 1 is
+    /// `floors[k]` (see [`crate::support::class_floors`]: thin objects get a
+    /// lower one), capped by `config.support_floor_m` (which still turns the
+    /// floor off at 0). Allocates; call it at start-up, not per frame.
+    pub fn support_floors(&mut self, floors: &[f32]) {
+        self.class_floors = floors.to_vec();
     }
 
     /// Cuts instance `i`'s region in two after its estimate
@@ -409,15 +452,64 @@ impl Workspace {
         }
     }
 
+    /// Region `id`'s mask (a component id of [`Workspace::component_ids`])
+    /// with box `bbox`, for verification.
+    pub fn mask_ref(&self, id: u32, bbox: [u16; 4]) -> MaskRef<'_> {
+        MaskRef { ids: self.component_ids(), id, bbox }
+    }
+
+    /// The plane the last frame's objects stand on, when the support floor
+    /// is on and the background held one.
+    pub fn support_plane(&self) -> Option<SupportPlane> {
+        self.support
+    }
+
+    /// Fits the support plane of this frame to its background pixels (see
+    /// [`WorkspaceConfig::support_floor_m`]).
+    fn fit_support(&mut self, frame: &FrameView<'_>, labels: &LabelPlane<'_>) {
+        self.support = None;
+        if self.config.support_floor_m <= 0.0 {
+            return;
+        }
+        let (w, h) = (frame.width(), frame.height());
+        let cap = w.div_ceil(SUPPORT_STRIDE) * h.div_ceil(SUPPORT_STRIDE);
+        if self.support_points.capacity() < cap {
+            self.support_points.reserve(cap - self.support_points.len());
+        }
+        self.support_points.clear();
+        for v in (SUPPORT_STRIDE / 2..h).step_by(SUPPORT_STRIDE) {
+            for u in (SUPPORT_STRIDE / 2..w).step_by(SUPPORT_STRIDE) {
+                let p = v * w + u;
+                if labels.class_at(p) == 0
+                    && let Some(z) = frame.depth.metres(p)
+                {
+                    self.support_points.push(sampling::back_project(frame, u, v, z).into());
+                }
+            }
+        }
+        self.support = support::fit(&self.support_points);
+    }
+
     fn prepare_instance(&mut self, frame: &FrameView<'_>, component: Component, rng: &mut Pcg64Mcg) {
         let w = frame.width();
         let [u_min, v_min, u_max, v_max] = component.bbox.map(|x| x as usize);
         self.candidates.clear();
         let ids = self.finder.component_ids();
+        let floor = match self.class_floors.get((component.class_id as usize).wrapping_sub(1)) {
+            Some(&f) => f.min(self.config.support_floor_m),
+            None => self.config.support_floor_m,
+        };
         for v in v_min..=v_max {
             for u in u_min..=u_max {
                 let p = v * w + u;
-                if ids[p] == component.component_id && frame.depth.metres(p).is_some() {
+                if ids[p] != component.component_id {
+                    continue;
+                }
+                let Some(z) = frame.depth.metres(p) else { continue };
+                let on_support = self
+                    .support
+                    .is_some_and(|plane| plane.height(&sampling::back_project(frame, u, v, z).into()).abs() < floor);
+                if !on_support {
                     self.candidates.push(p as u32);
                 }
             }

@@ -9,7 +9,7 @@
 use fusepose_estimator::alternates::{self, MIN_FIT};
 use fusepose_estimator::net::{NetEstimator, NetOptions};
 use fusepose_estimator::seg::SegEngine;
-use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
+use fusepose_estimator::verify::{Verifier, VerifyConfig};
 use fusepose_estimator::{ColorFormat, DepthPlane, Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace};
 use fusepose_scene::Intrinsics;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
@@ -84,7 +84,7 @@ fn an_alternate_is_the_regions_pose_as_that_class_and_the_depth_picks_the_true_c
         assert_eq!(alternate.iterations, 2);
 
         // Verification: the true class's model is what the depth supports.
-        let mask = MaskRef { ids: ws.component_ids(), id: region, bbox: primary.bbox };
+        let mask = ws.mask_ref(region, primary.bbox);
         let verdicts = [verifier.verify(&frame, mask, &primary), verifier.verify(&frame, mask, &alternate)];
         assert!(verdicts[1].passed && verdicts[1].fit >= MIN_FIT, "{wrong}: {:?}", verdicts[1]);
         assert!(!alternates::fails_as_alternate(&ws.instances, &alternate, verdicts[1].fit));

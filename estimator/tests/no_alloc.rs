@@ -73,13 +73,16 @@ fn prepare_and_icp_estimate_do_not_allocate_after_warm_up() {
     let (l, s) = (l_block(), step_block());
     let objects = object_set(&[l.clone(), s.clone()]);
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
-    let mut ws = Workspace::new(WorkspaceConfig { num_classes: 2, ..Default::default() }).unwrap();
+    // The support floor fits the tilted table behind the blocks every frame.
+    let config = WorkspaceConfig { num_classes: 2, support_floor_m: 0.004, ..Default::default() };
+    let mut ws = Workspace::new(config).unwrap();
     ws.join_parts(&fusepose_estimator::parts::extents(&objects, 1.0));
     ws.split_regions(&fusepose_estimator::split::CutLimits::new(&objects, 1.0));
     let mut out = PoseSet::with_capacity(8);
 
     let warm = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [-0.05, 0.0, 0.5]))]);
     assert_eq!(ws.prepare(&warm.view(), 0).unwrap(), 1);
+    assert!(ws.support_plane().is_some(), "the table behind the block is found");
     icp.estimate(&warm.view(), &mut ws, &mut out).unwrap();
 
     // Different frames: two objects, other poses, then one object again.
@@ -194,7 +197,7 @@ fn instance_planes_do_not_allocate_after_warm_up() {
 fn the_second_look_does_not_allocate_after_warm_up() {
     use fusepose_estimator::interpenetration::Solids;
     use fusepose_estimator::recut::{Recut, RecutConfig};
-    use fusepose_estimator::verify::{MaskRef, Verifier, VerifyConfig};
+    use fusepose_estimator::verify::{Verifier, VerifyConfig};
 
     let l = l_block();
     let objects = object_set(std::slice::from_ref(&l));
@@ -214,7 +217,7 @@ fn the_second_look_does_not_allocate_after_warm_up() {
         verdicts.clear();
         for p in poses.as_slice() {
             let id = ws.component_id(p.instance_id as usize).unwrap();
-            verdicts.push(verifier.verify(&view, MaskRef { ids: ws.component_ids(), id, bbox: p.bbox }, p));
+            verdicts.push(verifier.verify(&view, ws.mask_ref(id, p.bbox), p));
         }
         let stats =
             recut.run(&view, &mut ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap();

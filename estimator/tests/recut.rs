@@ -13,7 +13,7 @@ use common::{BoxObject, SyntheticFrame, l_block, object_set, painted, render};
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::recut::{Recut, RecutConfig, RecutStats};
-use fusepose_estimator::verify::{MaskRef, Verification, Verifier, VerifyConfig};
+use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
@@ -57,7 +57,7 @@ fn second_look_with(view: &FrameView<'_>, config: RecutConfig, estimator: &mut d
         .iter()
         .map(|p| {
             let id = ws.component_id(p.instance_id as usize).unwrap();
-            verifier.verify(view, MaskRef { ids: ws.component_ids(), id, bbox: p.bbox }, p)
+            verifier.verify(view, ws.mask_ref(id, p.bbox), p)
         })
         .collect();
     let before = poses.len();
@@ -233,7 +233,7 @@ impl Stream {
         self.verdicts.clear();
         for p in self.poses.as_slice() {
             let id = self.ws.component_id(p.instance_id as usize).unwrap();
-            let mask = MaskRef { ids: self.ws.component_ids(), id, bbox: p.bbox };
+            let mask = self.ws.mask_ref(id, p.bbox);
             self.verdicts.push(self.verifier.verify(&view, mask, p));
         }
         let (ws, poses, verdicts) = (&mut self.ws, &mut self.poses, &mut self.verdicts);

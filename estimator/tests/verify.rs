@@ -63,7 +63,7 @@ fn pose_of(class_id: u16, instance: usize, ws: &Workspace, p: &Pose) -> ObjectPo
 }
 
 fn mask<'a>(ws: &'a Workspace, i: usize) -> MaskRef<'a> {
-    MaskRef { ids: ws.component_ids(), id: ws.component_id(i).unwrap(), bbox: ws.instances[i].bbox }
+    ws.mask_ref(ws.component_id(i).unwrap(), ws.instances[i].bbox)
 }
 
 /// Calls `check(frame, workspace, instance, class id, true pose)` for every

@@ -44,6 +44,8 @@ pub fn frame_workspace_config() -> WorkspaceConfig {
         num_classes: 5,
         crop_margin: 0.15,
         min_valid_depth: 2,
+        // As the daemon runs it: arbitrary depth goes through the plane fit too.
+        support_floor_m: fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M,
     }
 }
 

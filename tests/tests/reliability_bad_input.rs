@@ -43,7 +43,20 @@ fn largest_layout() -> FrameLayout {
     FrameLayout { labels: Some(LabelFormat::InstanceU16 { max_instances: 64 }), ..f32_layout() }
 }
 
-/// A frame as header + payload bytes: a 16x12 object of class 1 at 0.8 m.
+/// The object's pixels in the test frames: columns 24..40, rows 18..30.
+fn on_object(i: usize) -> bool {
+    let (u, v) = (i as u32 % W, i as u32 / W);
+    (24..40).contains(&u) && (18..30).contains(&v)
+}
+
+/// Depth of the test frames: a table at 0.8 m and the object's top 3 cm
+/// nearer (an object coplanar with the table is a picture on it, and the
+/// daemon's support floor takes it for the table).
+fn object_depth(i: usize) -> f32 {
+    if on_object(i) { 0.77 } else { 0.8 }
+}
+
+/// A frame as header + payload bytes: a 16x12 object of class 1 standing 3 cm proud of a table at 0.8 m.
 struct RawFrame {
     header: FrameHeader,
     payload: Vec<u8>,
@@ -55,7 +68,7 @@ impl RawFrame {
         (header.fx, header.fy, header.cx, header.cy) = INTRINSICS;
         header.sequence = sequence;
         let mut frame = Self { header, payload: vec![0; layout.payload_len()] };
-        frame.fill_depth(|_| 0.8);
+        frame.fill_depth(object_depth);
         let labels = layout.planes()[2];
         for v in 18..30 {
             for u in 24..40 {
@@ -66,14 +79,14 @@ impl RawFrame {
     }
 
     /// Two touching 8x12 instances (ids 1 and 2) of one object in the middle
-    /// of the frame at 0.8 m; `classes` is the class table sent.
+    /// of the frame, 3 cm proud of a table at 0.8 m; `classes` is the class table sent.
     fn instances(sequence: u64, classes: [u16; 3]) -> Self {
         let layout = instance_layout();
         let mut header = layout.header(camera_id("cam0"));
         (header.fx, header.fy, header.cx, header.cy) = INTRINSICS;
         header.sequence = sequence;
         let mut frame = Self { header, payload: vec![0; layout.payload_len()] };
-        frame.fill_depth(|_| 0.8);
+        frame.fill_depth(object_depth);
         let ids = frame.header.labels.offset as usize;
         for v in 18..30 {
             for u in 24..40 {
@@ -347,7 +360,7 @@ fn every_bad_input_class_gets_its_own_reason_and_later_frames_are_served() -> an
 
     // Some NaN/inf among valid f32 readings are holes (protocol), not an error.
     let mut holes = rig.good(f32_layout());
-    holes.fill_depth(|i| if i % 3 == 0 { f32::NAN } else { 0.8 });
+    holes.fill_depth(|i| if i % 3 == 0 { f32::NAN } else { object_depth(i) });
     let msg = rig.send(holes)?;
     assert!(msg.is_ok(), "f32 depth with NaN holes: status {} reason {:?}", msg.status, msg.invalid());
 

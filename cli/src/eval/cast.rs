@@ -5,14 +5,10 @@
 //! `dim` then adds Gaussian sensor noise of σ = 3 8-bit levels, seeded per
 //! frame so that runs repeat. Depth, masks and ground truth are untouched.
 //!
-//! `--cast warm,cool` runs the whole evaluation once per cast (output files
-//! get a `_<cast>` suffix) and ends with one summary row per cast and run.
-
-use std::path::PathBuf;
+//! `--cast warm,cool` runs the whole evaluation once per cast
+//! ([`super::variants`]).
 
 use fusepose_scene::render::srgb;
-
-use super::Args;
 
 /// A colour cast applied to each frame before estimation.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
@@ -108,58 +104,6 @@ impl SplitMix64 {
     }
 }
 
-/// Runs `run_one` once per cast of `args.cast` (a single cast: just once, as
-/// before), then prints one summary row per cast and run. `run_one` returns
-/// the summaries `--json` writes, keyed by run name.
-pub fn run_each(
-    args: Args,
-    run_one: impl Fn(Args) -> anyhow::Result<serde_json::Map<String, serde_json::Value>>,
-) -> anyhow::Result<()> {
-    let mut casts = args.cast.clone();
-    casts.dedup();
-    if casts.len() <= 1 {
-        return run_one(args).map(|_| ());
-    }
-    let mut rows = Vec::new();
-    for &cast in &casts {
-        let mut one = args.clone();
-        one.cast = vec![cast];
-        let suffix = |p: &Option<PathBuf>| p.as_deref().map(|p| super::suffixed(p, cast.name()));
-        (one.json, one.csv, one.per_object_csv, one.plot) =
-            (suffix(&args.json), suffix(&args.csv), suffix(&args.per_object_csv), suffix(&args.plot));
-        one.overlay = args.overlay.as_ref().map(|d| d.join(cast.name()));
-        println!("\n=== colour cast: {} ===", cast.name());
-        for (run, summary) in run_one(one)? {
-            if let Some(o) = summary.get("overall") {
-                rows.push(summary_row(cast, &run, o));
-            }
-        }
-    }
-    println!("\nby colour cast (issue 19 robustness column)");
-    println!(
-        "{:<6}  {:<16}  {:>9}  {:>10}  {:>9}  {:>12}",
-        "cast", "run", "ADD-S AUC", "ADD(S) AUC", "ADD-S<2cm", "ghosts/frame"
-    );
-    for r in rows {
-        println!("{r}");
-    }
-    Ok(())
-}
-
-fn summary_row(cast: Cast, run: &str, o: &serde_json::Value) -> String {
-    let num = |k: &str| o.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
-    let ghosts = num("unmatched_estimates") / num("frames").max(1.0);
-    format!(
-        "{:<6}  {:<16}  {:>9.2}  {:>10.2}  {:>9.2}  {:>12.2}",
-        cast.name(),
-        run,
-        num("add_s_auc"),
-        num("add_s_auc_symmetric_aware"),
-        num("add_s_lt_2cm"),
-        ghosts
-    )
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -224,14 +168,5 @@ mod tests {
             rgb
         };
         assert_eq!(warm(1), warm(2));
-    }
-
-    #[test]
-    fn summary_rows_show_the_overall_numbers_and_ghosts_per_frame() {
-        let o = serde_json::json!({"add_s_auc": 93.456, "add_s_auc_symmetric_aware": 80.0,
-            "add_s_lt_2cm": 95.0, "unmatched_estimates": 12, "frames": 60});
-        let row = summary_row(Cast::Cool, "net", &o);
-        assert!(row.starts_with("cool    net"), "{row}");
-        assert!(row.contains("93.46") && row.contains("80.00") && row.ends_with("0.20"), "{row}");
     }
 }

@@ -23,6 +23,7 @@ use nalgebra::Vector3;
 use crate::frame::FrameView;
 use crate::parts::ClassExtents;
 use crate::sampling::back_project;
+use crate::support::{self, SupportPlane};
 
 use super::engine::softmax_terms;
 use super::input::FrameMap;
@@ -113,14 +114,6 @@ impl std::str::FromStr for DepthRegionParams {
     }
 }
 
-/// RANSAC hypotheses per frame (deterministic: the same frame, the same plane).
-const PLANE_TRIES: usize = 48;
-/// Plane inlier distance: metres plus this share of the depth.
-const PLANE_TOL_M: f32 = 0.005;
-const PLANE_TOL_PER_M: f32 = 0.005;
-/// A plane needs this share of the background cells with depth as inliers.
-const MIN_PLANE_SHARE: f32 = 0.2;
-
 /// Per-frame scratch and the class extents; see the module doc.
 #[derive(Debug)]
 pub struct DepthRegions {
@@ -136,8 +129,8 @@ pub struct DepthRegions {
     bounds: Vec<u32>,
     /// Cells per class in the component being judged (index = class id).
     counts: Vec<u32>,
-    /// Background cells with depth (RANSAC samples).
-    background: Vec<u32>,
+    /// Background cells' points (the plane's samples).
+    background: Vec<Vector3<f32>>,
 }
 
 impl DepthRegions {
@@ -199,61 +192,19 @@ impl DepthRegions {
         }
     }
 
-    /// The supporting plane `(n, d)` with `n·p + d` the height of p above it
-    /// (positive on the camera's side), or `None` when the background has none.
-    fn plane(&mut self, cells: &[u16]) -> Option<(Vector3<f32>, f32)> {
+    /// The supporting plane (see [`crate::support`]) of the background
+    /// cells with depth, or `None` when the background has none.
+    fn plane(&mut self, cells: &[u16]) -> Option<SupportPlane> {
         self.background.clear();
-        self.background
-            .extend((0..cells.len() as u32).filter(|&i| cells[i as usize] == 0 && self.points[i as usize][2] > 0.0));
-        let m = self.background.len();
-        if m < 16 {
-            return None;
-        }
-        let mut state = 0x9e37_79b9_7f4a_7c15u64 ^ m as u64;
-        let mut next = |bound: usize| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((state >> 33) as usize) % bound
-        };
-        // Inliers are counted on every other background cell: the plane is large.
-        let stride = if m > 2000 { 2 } else { 1 };
-        let mut best: Option<(Vector3<f32>, f32, usize)> = None;
-        for _ in 0..PLANE_TRIES {
-            let [a, b, c] = [next(m), next(m), next(m)].map(|i| self.points[self.background[i] as usize]);
-            let nrm = (b - a).cross(&(c - a));
-            let len = nrm.norm();
-            if len.is_nan() || len <= 1e-9 {
-                continue;
-            }
-            let mut nrm = nrm / len;
-            let mut d = -nrm.dot(&a);
-            // The camera (origin) is above the plane.
-            if d < 0.0 {
-                nrm = -nrm;
-                d = -d;
-            }
-            let inliers = self
-                .background
-                .iter()
-                .step_by(stride)
-                .filter(|&&i| {
-                    let p = self.points[i as usize];
-                    (nrm.dot(&p) + d).abs() <= PLANE_TOL_M + PLANE_TOL_PER_M * p.z
-                })
-                .count();
-            if best.is_none_or(|(_, _, b)| inliers > b) {
-                best = Some((nrm, d, inliers));
-            }
-        }
-        let (nrm, d, inliers) = best?;
-        ((inliers * stride) as f32 >= MIN_PLANE_SHARE * m as f32).then_some((nrm, d))
+        self.background.extend(cells.iter().zip(&self.points).filter(|(c, p)| **c == 0 && p.z > 0.0).map(|(_, p)| *p));
+        support::fit(&self.background)
     }
 
     /// The components of the cells standing on the plane: their cells in
     /// `self.members`, component k at `self.bounds[k]..self.bounds[k + 1]`.
-    fn components(&mut self, plane: &(Vector3<f32>, f32), gw: usize, gh: usize) {
-        let (nrm, d) = *plane;
+    fn components(&mut self, plane: &SupportPlane, gw: usize, gh: usize) {
         let p = self.params;
-        let above = |q: &Vector3<f32>| q.z > 0.0 && nrm.dot(q) + d > p.min_height_m;
+        let above = |q: &Vector3<f32>| q.z > 0.0 && plane.height(q) > p.min_height_m;
         self.seen.fill(false);
         self.members.clear();
         self.bounds.clear();

@@ -99,7 +99,7 @@ struct FramePlanes {
     labels: Vec<u16>,
 }
 
-/// K rectangles of classes 1.. (100×80 px) at 0.8 m on a 640×480 frame; depth in mm.
+/// K rectangles of classes 1.. (100×80 px) 3 cm proud of a table at 0.8 m on a 640×480 frame; depth in mm.
 fn rectangle_frame(objects: u32) -> (FrameLayout, f64, FramePlanes) {
     let (w, h) = (640usize, 480usize);
     let mut labels = vec![0u16; w * h];
@@ -109,7 +109,10 @@ fn rectangle_frame(objects: u32) -> (FrameLayout, f64, FramePlanes) {
             labels[v * w + u0..v * w + u0 + 100].fill((k % 8 + 1) as u16); // the built-in set has 8 classes
         }
     }
-    let planes = FramePlanes { rgb: vec![0; w * h * 3], depth: vec![800; w * h], labels };
+    // Each rectangle stands 3 cm proud of the table at 0.8 m (one lying in the
+    // table's plane is the table to the daemon's support floor).
+    let depth = labels.iter().map(|&l| if l == 0 { 800 } else { 770 }).collect();
+    let planes = FramePlanes { rgb: vec![0; w * h * 3], depth, labels };
     (FrameLayout::vga_rgbd(), 525.0, planes)
 }
 
