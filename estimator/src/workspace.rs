@@ -499,6 +499,8 @@ impl Workspace {
             Some(&f) => f.min(self.config.support_floor_m),
             None => self.config.support_floor_m,
         };
+        // No floor for this class: no pixel needs back-projecting.
+        let support = self.support.filter(|_| floor > 0.0);
         for v in v_min..=v_max {
             for u in u_min..=u_max {
                 let p = v * w + u;
@@ -506,8 +508,7 @@ impl Workspace {
                     continue;
                 }
                 let Some(z) = frame.depth.metres(p) else { continue };
-                let on_support = self
-                    .support
+                let on_support = support
                     .is_some_and(|plane| plane.height(&sampling::back_project(frame, u, v, z).into()).abs() < floor);
                 if !on_support {
                     self.candidates.push(p as u32);
