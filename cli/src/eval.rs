@@ -236,6 +236,12 @@ pub struct Args {
     /// `--recut`: how far apart the pieces' poses must be, × the object's smallest side.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_separation)]
     pub recut_separation: f32,
+    /// `--recut`: where a region's cut comes from: `points` (k-means on its
+    /// 3D points), `votes` (the segmenter's centre-offset votes where its
+    /// file has the head and they point at two centres, else the points) or
+    /// `votes-only`, as the daemon's `estimator.recut_proposal`.
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.proposal)]
+    pub recut_proposal: fusepose_estimator::recut::CutProposal,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -507,7 +513,7 @@ struct Runner {
     /// `--recut`: the second look and the network sibling that estimates its
     /// pieces; regions cut again and cuts kept.
     recut: Option<(fusepose_estimator::recut::Recut, Box<dyn Estimator>)>,
-    recut_stats: [usize; 2],
+    recut_stats: [usize; 7],
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -585,6 +591,7 @@ impl Runner {
                 let recut_config = fusepose_estimator::recut::RecutConfig {
                     max_coverage: args.recut,
                     min_separation: args.recut_separation,
+                    proposal: args.recut_proposal,
                     ..fusepose_estimator::recut::RecutConfig::DEFAULT
                 };
                 if recut_config.is_on() && args.verify != "off" {
@@ -675,7 +682,7 @@ impl Runner {
             alternates_kept: 0,
             class_means: Vec::new(),
             recut: recut_parts,
-            recut_stats: [0; 2],
+            recut_stats: [0; 7],
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -842,6 +849,10 @@ impl Runner {
                 Ok(s) => {
                     self.recut_stats[0] += s.tried;
                     self.recut_stats[1] += s.kept;
+                    self.recut_stats[2] += s.by_votes;
+                    for (k, r) in s.refused.iter().enumerate() {
+                        self.recut_stats[3 + k] += r;
+                    }
                     if s.kept > 0 {
                         verdicts = all.into_iter().map(Some).collect();
                         passed = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
@@ -1001,8 +1012,11 @@ impl Runner {
             );
         }
         if self.recut.is_some() {
-            let [tried, kept] = self.recut_stats;
-            println!("regions looked at again (pose coverage below the recut limit): {tried} cut, {kept} kept as two");
+            let [tried, kept, by_votes, unverified, close, explained, overlap] = self.recut_stats;
+            println!(
+                "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes), {kept} kept as two; \
+                 refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap"
+            );
         }
         if self.instance_counts.truth > 0 {
             println!("{}", self.instance_counts.summary());

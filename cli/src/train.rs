@@ -152,6 +152,11 @@ pub struct Args {
     /// file without one as it is, e.g. to fine-tune the shipped segmenter).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]
     pub seg_offsets: bool,
+    /// `--stage seg`: weight of the centre-offset loss beside the
+    /// cross-entropy (lower it to add a head to a trained segmenter without
+    /// moving its class features far).
+    #[arg(long, default_value_t = 1.0, value_parser = loss_weight)]
+    pub seg_offset_weight: f64,
     /// `--stage seg`: threads rendering training frames (default: one per
     /// core; the frames, and so the trained weights, are the same for any count).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
@@ -458,6 +463,14 @@ fn bench_data(set: &fusepose_scene::ObjectSet, args: &Args) -> anyhow::Result<()
     Ok(())
 }
 
+/// A loss weight: a finite number >= 0.
+fn loss_weight(s: &str) -> Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(w) if w.is_finite() && w >= 0.0 => Ok(w),
+        _ => Err(format!("{s:?} is not a loss weight: expected a finite number >= 0 (1 = as much as the class loss)")),
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use clap::Parser;
@@ -472,6 +485,17 @@ mod tests {
 
     fn args(flags: &[&str]) -> Args {
         Cmd::try_parse_from(std::iter::once("train").chain(flags.iter().copied())).unwrap().args
+    }
+
+    #[test]
+    fn the_offset_loss_weight_is_a_finite_number_at_least_zero() {
+        assert_eq!(args(&[]).seg_offset_weight, 1.0);
+        assert_eq!(args(&["--seg-offset-weight", "0.2"]).seg_offset_weight, 0.2);
+        for bad in ["-1", "nan", "inf", "x"] {
+            let flag = format!("--seg-offset-weight={bad}");
+            let err = Cmd::try_parse_from(["train", flag.as_str()]).err().unwrap().to_string();
+            assert!(err.contains("finite number >= 0"), "{bad}: {err}");
+        }
     }
 
     #[test]

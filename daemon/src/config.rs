@@ -264,6 +264,11 @@ pub struct EstimatorConfig {
     /// when both poses pass and are two copies by the depth image
     /// (`fusepose_estimator::recut`). 0 = off.
     pub recut: f32,
+    /// `recut`: where the cut comes from: `votes` (the segmenter's
+    /// centre-offset votes where its file has the head and they point at two
+    /// centres, else the region's 3D points), `votes-only` or `points`
+    /// (`fusepose_estimator::recut::CutProposal`).
+    pub recut_proposal: String,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -392,6 +397,7 @@ impl Default for EstimatorConfig {
             max_explained_share: fusepose_estimator::explained::DEFAULT_MAX_SHARE,
             class_alternates: fusepose_estimator::alternates::DEFAULT_MIN_PROBABILITY,
             recut: fusepose_estimator::recut::RecutConfig::DEFAULT.max_coverage,
+            recut_proposal: fusepose_estimator::recut::RecutConfig::DEFAULT.proposal.to_string(),
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             seg_depth_regions: "on".to_owned(),
@@ -626,6 +632,13 @@ impl DaemonConfig {
                 "must be refine:N (N in 0..=255), erode-cells or cells",
             ));
         }
+        if e.recut_proposal.parse::<fusepose_estimator::recut::CutProposal>().is_err() {
+            return Err(invalid(
+                "estimator.recut_proposal",
+                &e.recut_proposal,
+                "must be \"votes\", \"votes-only\" or \"points\"",
+            ));
+        }
         if e.seg_voting.parse::<fusepose_estimator::seg::VotingMode>().is_err() {
             return Err(invalid(
                 "estimator.seg_voting",
@@ -850,6 +863,11 @@ mod tests {
         assert!(err.starts_with("estimator.max_explained_share") && err.contains("1 = off"), "{err}");
         let err = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_boundary"), "{err}");
+        let err = DaemonConfig::parse("[estimator]\nrecut_proposal = \"vote\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.recut_proposal") && err.contains("\"votes-only\""), "{err}");
+        let c = DaemonConfig::parse("[estimator]\nrecut_proposal = \"points\"\n").unwrap();
+        assert_eq!(c.estimator.recut_proposal, "points");
+        assert_eq!(DaemonConfig::parse("").unwrap().estimator.recut_proposal, "votes");
         let err = DaemonConfig::parse("[estimator]\nseg_voting = \"no\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_voting") && err.contains("\"off\""), "{err}");
         let c = DaemonConfig::parse("[estimator]\nseg_voting = \"12,6,6\"\n").unwrap();

@@ -207,7 +207,9 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             spec.interpenetration = Some((Arc::new(Solids::new(&objects)), config.max_interpenetration));
         }
         // A second look needs a pose's verification to decide.
-        let recut = RecutConfig { max_coverage: config.recut, ..RecutConfig::DEFAULT };
+        // Validated with the rest of the configuration.
+        let proposal = config.recut_proposal.parse().unwrap_or(RecutConfig::DEFAULT.proposal);
+        let recut = RecutConfig { max_coverage: config.recut, proposal, ..RecutConfig::DEFAULT };
         if let Some((objects, _, _)) = spec.verify.as_ref().filter(|_| recut.is_on()) {
             let solids = match &spec.interpenetration {
                 Some((solids, _)) => solids.clone(),

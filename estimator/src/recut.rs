@@ -38,7 +38,7 @@ use fusepose_scene::ObjectSet;
 use crate::frame::{FrameView, LabelPlane};
 use crate::poses::{ObjectPose, PoseSet};
 use crate::seg::SegEngine;
-use crate::split::{kmeans, nearest_piece, project};
+use crate::split::{kmeans, nearest_2d, nearest_piece, project};
 use crate::verify::{MaskRef, Verification, Verifier};
 use crate::workspace::{CutHint, Workspace, WorkspaceConfig, WorkspaceConfigError};
 use crate::{EstimateError, Estimator};
@@ -62,6 +62,61 @@ const MIN_POINTS: usize = 64;
 /// Each piece must hold at least this share of the region's samples: a
 /// sliver is what the mask bled onto, not a copy.
 const MIN_PIECE_SHARE: f32 = 0.2;
+/// Centre votes of two copies lie at least this far apart (segmenter output
+/// cells; the votes of one object scatter by a cell or two, and copies that
+/// touch have centres a body width apart, several cells at working range).
+const MIN_VOTE_GAP_CELLS: f32 = 3.0;
+
+/// Where each pixel's object centre lies: a segmenter's centre-offset votes
+/// ([`SegEngine::vote_at`]). The pixels of one object vote for one point,
+/// those of two touching copies for two.
+pub trait CentreVotes {
+    /// The vote of frame pixel `(u, v)`, in segmenter output cells (x, y);
+    /// `None` where there is none.
+    fn vote_at(&self, u: usize, v: usize) -> Option<[f32; 2]>;
+}
+
+impl CentreVotes for SegEngine {
+    fn vote_at(&self, u: usize, v: usize) -> Option<[f32; 2]> {
+        SegEngine::vote_at(self, u, v)
+    }
+}
+
+/// Where a region's cut in two comes from.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum CutProposal {
+    /// k-means on the region's 3D points.
+    Points,
+    /// The segmenter's centre-offset votes where its file has the head and
+    /// they fall into two groups apart; else the 3D points.
+    Votes,
+    /// The votes only: a region whose votes point at one centre is not cut.
+    VotesOnly,
+}
+
+impl std::fmt::Display for CutProposal {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Points => "points",
+            Self::Votes => "votes",
+            Self::VotesOnly => "votes-only",
+        })
+    }
+}
+
+/// `points`, `votes` or `votes-only`.
+impl std::str::FromStr for CutProposal {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "points" => Ok(Self::Points),
+            "votes" => Ok(Self::Votes),
+            "votes-only" => Ok(Self::VotesOnly),
+            _ => Err(format!("cut proposal {s:?}: expected points, votes or votes-only")),
+        }
+    }
+}
 
 /// When a region is looked at again, and what its cut must show.
 #[derive(Clone, Copy, Debug, PartialEq)]
@@ -82,12 +137,20 @@ pub struct RecutConfig {
     pub max_overlap: f32,
     /// Most regions looked at per frame (the lowest coverage first).
     pub max_regions: usize,
+    /// Where the cut comes from.
+    pub proposal: CutProposal,
 }
 
 impl RecutConfig {
     /// The daemon's and `fusepose eval`'s default.
-    pub const DEFAULT: Self =
-        Self { max_coverage: 0.85, min_separation: 0.5, max_cross_explained: 0.5, max_overlap: 0.15, max_regions: 2 };
+    pub const DEFAULT: Self = Self {
+        max_coverage: 0.85,
+        min_separation: 0.5,
+        max_cross_explained: 0.5,
+        max_overlap: 0.15,
+        max_regions: 2,
+        proposal: CutProposal::Votes,
+    };
 
     pub fn is_on(&self) -> bool {
         self.max_coverage > 0.0 && self.max_regions > 0
@@ -106,6 +169,21 @@ pub struct RecutStats {
     /// Regions cut but not estimated ([`Recut::defer_next_frame`]): their
     /// cuts are carried to the next frame untried.
     pub deferred: usize,
+    /// Of the regions cut, those cut along the segmenter's centre votes.
+    pub by_votes: usize,
+    /// Cuts estimated and refused, by the first term that refused them:
+    /// a piece without a pose or whose pose failed verification, poses too
+    /// close, one pose explaining the other's piece, solids overlapping.
+    pub refused: [usize; 4],
+}
+
+/// Why a cut's pieces are not two copies (index into [`RecutStats::refused`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Refusal {
+    Unverified = 0,
+    Close = 1,
+    Explained = 2,
+    Overlap = 3,
 }
 
 /// A region chosen for a second look.
@@ -134,6 +212,12 @@ pub struct Recut {
     verdicts: Vec<Verification>,
     candidates: Vec<Candidate>,
     samples: Vec<[f32; 3]>,
+    /// Frame pixel of each sample.
+    sample_pixels: Vec<[u16; 2]>,
+    /// Each sample's centre vote (cells, z = 0) when the cut follows votes.
+    sample_votes: Vec<[f32; 3]>,
+    /// [`Recut::set_votes`].
+    votes: Option<Box<dyn CentreVotes + Send>>,
     cluster: Vec<u8>,
     order: Vec<(f32, u8)>,
     /// Per candidate: its two centres (k-means), camera frame.
@@ -143,6 +227,8 @@ pub struct Recut {
     frame_limit: Option<usize>,
     /// [`Recut::defer_next_frame`], for the next frame only.
     defer: Option<()>,
+    /// Cuts refused in this frame's [`Recut::run`], by [`Refusal`].
+    refusals: [usize; 4],
     /// Cuts the next frame refused, per class and midpoint, with the frames
     /// for which no region there is cut again without its pieces' poses.
     refused: Vec<Refused>,
@@ -175,12 +261,16 @@ impl Recut {
             verdicts: Vec::with_capacity(4 * regions),
             candidates: Vec::with_capacity(ws_config.max_instances.max(regions)),
             samples: Vec::with_capacity(SAMPLES),
+            sample_pixels: Vec::with_capacity(SAMPLES),
+            sample_votes: Vec::with_capacity(SAMPLES),
+            votes: None,
             cluster: vec![0; SAMPLES],
             order: Vec::with_capacity(SAMPLES),
             centres: Vec::with_capacity(regions),
             marks: Vec::with_capacity(4 * ws_config.max_instances),
             frame_limit: None,
             defer: None,
+            refusals: [0; 4],
             refused: Vec::with_capacity(ws_config.max_instances),
             carried: Vec::with_capacity(ws_config.max_instances),
         })
@@ -208,6 +298,12 @@ impl Recut {
         self.defer = Some(());
     }
 
+    /// Centre votes for the cuts from a source other than the segmenter
+    /// (tests, or a producer's own votes); they replace the segmenter's.
+    pub fn set_votes(&mut self, votes: Box<dyn CentreVotes + Send>) {
+        self.votes = Some(votes);
+    }
+
     /// Looks at no more than `regions` regions in the next [`Recut::run`]
     /// only: what the frame's time left pays for (the daemon).
     pub fn limit_next_frame(&mut self, regions: usize) {
@@ -221,7 +317,8 @@ impl Recut {
     /// replaced by its pieces' poses (with their verdicts, appended) and
     /// `ws` holds the pieces as two instances. `segmenter`: the built-in
     /// segmenter when it made the regions (its certainty is judged on the
-    /// pieces as on any region). `estimator` estimates the pieces; it should
+    /// pieces as on any region, and its centre votes propose the cuts unless
+    /// [`Recut::set_votes`] gave others). `estimator` estimates the pieces; it should
     /// not be one that tracks objects across frames (its tracks would see
     /// only the pieces).
     #[allow(clippy::too_many_arguments)] // the frame's parts, borrowed one by one
@@ -237,6 +334,7 @@ impl Recut {
         seed: u64,
     ) -> Result<RecutStats, EstimateError> {
         let mut stats = RecutStats::default();
+        self.refusals = [0; 4];
         // What stood in the last frame is carried only into the next.
         self.carried.clear();
         for r in &mut self.refused {
@@ -255,7 +353,12 @@ impl Recut {
         if self.candidates.is_empty() {
             return Ok(stats);
         }
-        self.cut(frame, ws, poses.as_slice());
+        // Votes set from elsewhere, else the segmenter's where its file has the head.
+        let own = self.votes.take();
+        let from_segmenter = segmenter.filter(|s| !s.offsets().is_empty()).map(|s| s as &dyn CentreVotes);
+        let votes = own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter);
+        stats.by_votes = self.cut(frame, ws, poses.as_slice(), votes);
+        self.votes = own;
         stats.tried = self.centres.len();
         if stats.tried == 0 {
             return Ok(stats);
@@ -270,6 +373,7 @@ impl Recut {
             this.verify(view, verifier, segmenter);
             this.apply(frame, view, verifier, ids, ws, poses, verdicts)
         })?;
+        stats.refused = self.refusals;
         Ok(stats)
     }
 
@@ -348,7 +452,7 @@ impl Recut {
             let (Some(a), Some(b)) = (find(ida), find(idb)) else { continue };
             let (pa, pb) = (poses.as_slice()[a], poses.as_slice()[b]);
             let (ma, mb) = (ws.mask_ref(ida, pa.bbox), ws.mask_ref(idb, pb.bbox));
-            if terms.two_copies(view, verifier, (&pa, &verdicts[a], ma), (&pb, &verdicts[b], mb)) {
+            if terms.two_copies(view, verifier, (&pa, &verdicts[a], ma), (&pb, &verdicts[b], mb)).is_ok() {
                 let centre = |i: usize| {
                     let inst = ws.instances[i];
                     let points = &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)];
@@ -414,12 +518,22 @@ impl Recut {
         self.candidates.truncate(self.config.max_regions.min(self.frame_limit.take().unwrap_or(usize::MAX)));
     }
 
-    /// Writes the candidates' pieces into the instance plane: k-means in 3D
-    /// over up to [`SAMPLES`] of the region's valid-depth points, every
-    /// pixel to its nearest centre (by image distance to the projected
-    /// centres where it has no depth). Candidates whose pieces are too
-    /// uneven are dropped.
-    fn cut(&mut self, frame: &FrameView<'_>, ws: &Workspace, poses: &[ObjectPose]) {
+    /// Writes the candidates' pieces into the instance plane, from up to
+    /// [`SAMPLES`] of the region's valid-depth points: by their centre votes
+    /// where [`RecutConfig::proposal`] asks for them and they fall into two
+    /// groups [`MIN_VOTE_GAP_CELLS`] apart (every pixel to the group nearest
+    /// its cell's vote), else by k-means in 3D (every pixel to its nearest
+    /// centre, by image distance to the projected centres where it has no
+    /// depth). Candidates whose pieces are too uneven are dropped. Returns
+    /// how many were cut along votes.
+    fn cut(
+        &mut self,
+        frame: &FrameView<'_>,
+        ws: &Workspace,
+        poses: &[ObjectPose],
+        votes: Option<&dyn CentreVotes>,
+    ) -> usize {
+        let voter = votes.filter(|_| self.config.proposal != CutProposal::Points);
         let (w, h) = (frame.width(), frame.height());
         for b in self.written.drain(..) {
             let [u0, v0, u1, v1] = b.map(|x| x as usize);
@@ -430,7 +544,7 @@ impl Recut {
         self.classes.fill(0);
         self.centres.clear();
         let all = ws.component_ids();
-        let mut kept = 0;
+        let (mut kept, mut by_votes) = (0, 0);
         for c in 0..self.candidates.len() {
             let pose = poses[self.candidates[c].pose];
             let Some(id) = ws.component_id(pose.instance_id as usize) else { continue };
@@ -446,6 +560,7 @@ impl Recut {
             }
             let stride = valid.div_ceil(SAMPLES).max(1);
             self.samples.clear();
+            self.sample_pixels.clear();
             let points = (v0..=v1)
                 .flat_map(|v| (u0..=u1).map(move |u| (u, v)))
                 .filter_map(|(u, v)| {
@@ -453,29 +568,70 @@ impl Recut {
                     frame.depth.metres(p).filter(|_| in_region(p)).map(|z| (u, v, z))
                 })
                 .step_by(stride)
-                .take(SAMPLES)
-                .map(|(u, v, z)| crate::sampling::back_project(frame, u, v, z));
-            self.samples.extend(points);
+                .take(SAMPLES);
+            for (u, v, z) in points {
+                self.samples.push(crate::sampling::back_project(frame, u, v, z));
+                self.sample_pixels.push([u as u16, v as u16]);
+            }
             let n = self.samples.len();
-            let centres = kmeans(&self.samples, 2, &mut self.cluster[..n], &mut self.order);
-            let ones = self.cluster[..n].iter().filter(|&&x| x == 1).count();
             let min = (MIN_PIECE_SHARE * n as f32).ceil() as usize;
-            if ones < min || n - ones < min {
-                continue;
-            }
-            let centres = [centres[0], centres[1]];
-            let pixels = [project(frame, Some(&centres[0])), project(frame, Some(&centres[1]))];
-            let base = 2 * kept as u16;
-            for v in v0..=v1 {
-                for u in u0..=u1 {
-                    let p = v * w + u;
-                    if !in_region(p) {
-                        continue;
-                    }
-                    let piece = nearest_piece(frame, &centres, &pixels, p);
-                    self.ids[p] = base + 1 + piece as u16;
+            let even = |cluster: &[u8]| {
+                let ones = cluster.iter().filter(|&&x| x == 1).count();
+                ones >= min && n - ones >= min
+            };
+            let vote_centres = voter.and_then(|seg| {
+                self.sample_votes.clear();
+                for &[u, v] in &self.sample_pixels {
+                    let [x, y] = seg.vote_at(u as usize, v as usize)?;
+                    self.sample_votes.push([x, y, 0.0]);
                 }
-            }
+                let c = kmeans(&self.sample_votes, 2, &mut self.cluster[..n], &mut self.order);
+                let gap = ((c[0][0] - c[1][0]).powi(2) + (c[0][1] - c[1][1]).powi(2)).sqrt();
+                (gap >= MIN_VOTE_GAP_CELLS && even(&self.cluster[..n]))
+                    .then_some([[c[0][0], c[0][1]], [c[1][0], c[1][1]]])
+            });
+            let base = 2 * kept as u16;
+            let centres = if let (Some(seg), Some(votes)) = (voter, vote_centres) {
+                // The pieces' 3D centres (for the cut carried to the next frame).
+                let mut sums = [[0.0f32; 4]; 2];
+                for (p, &k) in self.samples.iter().zip(&self.cluster[..n]) {
+                    let s = &mut sums[k.min(1) as usize];
+                    *s = [s[0] + p[0], s[1] + p[1], s[2] + p[2], s[3] + 1.0];
+                }
+                for v in v0..=v1 {
+                    for u in u0..=u1 {
+                        let p = v * w + u;
+                        if !in_region(p) {
+                            continue;
+                        }
+                        let piece = seg.vote_at(u, v).map_or(0, |vote| nearest_2d(&votes, vote));
+                        self.ids[p] = base + 1 + piece as u16;
+                    }
+                }
+                by_votes += 1;
+                sums.map(|s| [s[0] / s[3], s[1] / s[3], s[2] / s[3]])
+            } else {
+                if voter.is_some() && self.config.proposal == CutProposal::VotesOnly {
+                    continue;
+                }
+                let centres = kmeans(&self.samples, 2, &mut self.cluster[..n], &mut self.order);
+                if !even(&self.cluster[..n]) {
+                    continue;
+                }
+                let centres = [centres[0], centres[1]];
+                let pixels = [project(frame, Some(&centres[0])), project(frame, Some(&centres[1]))];
+                for v in v0..=v1 {
+                    for u in u0..=u1 {
+                        let p = v * w + u;
+                        if !in_region(p) {
+                            continue;
+                        }
+                        let piece = nearest_piece(frame, &centres, &pixels, p);
+                        self.ids[p] = base + 1 + piece as u16;
+                    }
+                }
+                centres
+            };
             self.classes[base as usize + 1] = pose.class_id;
             self.classes[base as usize + 2] = pose.class_id;
             self.written.push(bbox);
@@ -484,6 +640,7 @@ impl Recut {
             kept += 1;
         }
         self.candidates.truncate(kept);
+        by_votes
     }
 
     /// Verifies each piece's pose on its piece's mask.
@@ -516,8 +673,15 @@ impl Recut {
     }
 
     /// Whether candidate `j`'s pieces are two copies ([`Terms::two_copies`]).
-    fn pieces_are_two_copies(&mut self, j: usize, view: &FrameView<'_>, verifier: &mut Verifier) -> bool {
-        let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { return false };
+    fn pieces_are_two_copies(
+        &mut self,
+        j: usize,
+        view: &FrameView<'_>,
+        verifier: &mut Verifier,
+    ) -> Result<(), Refusal> {
+        let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else {
+            return Err(Refusal::Unverified);
+        };
         let (pa, pb) = (self.poses.as_slice()[a], self.poses.as_slice()[b]);
         let ma = self.ws.mask_ref((2 * j + 1) as u32, pa.bbox);
         let mb = self.ws.mask_ref((2 * j + 2) as u32, pb.bbox);
@@ -542,7 +706,8 @@ impl Recut {
         let mut kept = 0;
         for j in 0..self.candidates.len() {
             let whole = self.candidates[j].pose;
-            if !self.pieces_are_two_copies(j, view, verifier) {
+            if let Err(why) = self.pieces_are_two_copies(j, view, verifier) {
+                self.refusals[why as usize] += 1;
                 continue;
             }
             let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { continue };
@@ -597,17 +762,17 @@ impl Terms<'_> {
         verifier: &mut Verifier,
         (pa, va, ma): (&ObjectPose, &Verification, MaskRef<'_>),
         (pb, vb, mb): (&ObjectPose, &Verification, MaskRef<'_>),
-    ) -> bool {
+    ) -> Result<(), Refusal> {
         if !(va.passed && vb.passed) {
-            return false;
+            return Err(Refusal::Unverified);
         }
         let side = self.sides.get(pa.class_id as usize - 1).copied().unwrap_or(0.0);
         if (pa.translation - pb.translation).norm() < (self.config.min_separation * side) as f64 {
-            return false;
+            return Err(Refusal::Close);
         }
         let explained = verifier.explained_share(view, mb, pa).max(verifier.explained_share(view, ma, pb));
         if explained >= self.config.max_cross_explained {
-            return false;
+            return Err(Refusal::Explained);
         }
         let iso =
             |p: &ObjectPose| nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(p.translation), p.rotation);
@@ -618,6 +783,9 @@ impl Terms<'_> {
             pa.class_id,
             &ia,
         ));
-        overlap <= self.config.max_overlap
+        if overlap > self.config.max_overlap {
+            return Err(Refusal::Overlap);
+        }
+        Ok(())
     }
 }

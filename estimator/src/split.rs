@@ -493,7 +493,7 @@ pub(crate) fn nearest_piece(frame: &FrameView<'_>, centres: &[[f32; 3]], pixels:
 }
 
 /// Index of the projected centre nearest to pixel `uv`.
-fn nearest_2d(pixels: &[[f32; 2]], uv: [f32; 2]) -> usize {
+pub(crate) fn nearest_2d(pixels: &[[f32; 2]], uv: [f32; 2]) -> usize {
     let d = |c: &[f32; 2]| (c[0] - uv[0]).powi(2) + (c[1] - uv[1]).powi(2);
     (0..pixels.len()).min_by(|&a, &b| d(&pixels[a]).total_cmp(&d(&pixels[b]))).unwrap_or(0)
 }

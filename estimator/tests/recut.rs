@@ -12,7 +12,7 @@ use std::sync::Arc;
 use common::{BoxObject, SyntheticFrame, l_block, object_set, painted, render};
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
 use fusepose_estimator::interpenetration::Solids;
-use fusepose_estimator::recut::{Recut, RecutConfig, RecutStats};
+use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutStats};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
@@ -45,6 +45,16 @@ fn second_look(view: &FrameView<'_>, config: RecutConfig) -> Outcome {
 
 /// As [`second_look`], with `estimator` for the first estimate and the pieces.
 fn second_look_with(view: &FrameView<'_>, config: RecutConfig, estimator: &mut dyn Estimator) -> Outcome {
+    second_look_voted(view, config, estimator, None)
+}
+
+/// As [`second_look_with`], with centre votes for the cut.
+fn second_look_voted(
+    view: &FrameView<'_>,
+    config: RecutConfig,
+    estimator: &mut dyn Estimator,
+    votes: Option<Votes>,
+) -> Outcome {
     let objects = object_set(&[l_block()]);
     let ws_config = WorkspaceConfig { num_classes: 1, ..Default::default() };
     let mut ws = Workspace::new(ws_config).unwrap();
@@ -62,6 +72,9 @@ fn second_look_with(view: &FrameView<'_>, config: RecutConfig, estimator: &mut d
         .collect();
     let before = poses.len();
     let mut recut = Recut::new(&objects, Arc::new(Solids::new(&objects)), ws_config, config).unwrap();
+    if let Some(votes) = votes {
+        recut.set_votes(Box::new(votes));
+    }
     let stats = recut.run(view, &mut ws, &mut poses, &mut verdicts, estimator, &mut verifier, None, 7).unwrap();
     Outcome { poses, verdicts, stats, ws, before }
 }
@@ -90,6 +103,74 @@ fn two_touching_copies_in_one_region_get_a_pose_each() {
         let k = frame.intrinsics;
         assert_eq!(centre_u < k.cx, p.translation.x < 0.0, "pose and mask on the same side");
     }
+}
+
+/// Centre votes as a segmenter's offset head would give them, in cells of
+/// 4 frame pixels (a 160x120 segmenter input on the 320x240 test frame).
+struct Votes(fn(usize, usize) -> [f32; 2]);
+
+impl CentreVotes for Votes {
+    fn vote_at(&self, u: usize, v: usize) -> Option<[f32; 2]> {
+        Some((self.0)(u, v))
+    }
+}
+
+/// The cell of the projection of camera point `(x, 0, 0.5)` on the test frame.
+fn centre_cell(x: f64) -> [f32; 2] {
+    let k = common::intrinsics();
+    [((k.fx * x / 0.5 + k.cx) / 4.0) as f32, (k.cy / 4.0) as f32]
+}
+
+#[test]
+fn votes_for_two_centres_cut_the_region_along_them() {
+    let l = l_block();
+    let frame = pair(&l);
+    // Each copy's pixels vote for its own centre (the blocks meet at the image centre).
+    let votes = Votes(|u, _| centre_cell(if (u as f64) < common::intrinsics().cx { -0.04 } else { 0.04 }));
+    let objects = object_set(&[l_block()]);
+    let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+    let config = RecutConfig { proposal: CutProposal::VotesOnly, ..RecutConfig::DEFAULT };
+    let out = second_look_voted(&frame.view(), config, &mut icp, Some(votes));
+    assert_eq!((out.before, out.stats.tried, out.stats.by_votes, out.stats.kept), (1, 1, 1, 1));
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    for (x, truth) in xs.iter().zip([-0.04, 0.04]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
+    // The pieces meet where the votes change sides.
+    let cx = common::intrinsics().cx as u16;
+    let mut boxes: Vec<[u16; 4]> = out.ws.instances.iter().map(|i| i.bbox).collect();
+    boxes.sort();
+    assert_eq!((boxes[0][2], boxes[1][0]), (cx - 1, cx), "piece boxes {boxes:?}");
+}
+
+#[test]
+fn votes_for_one_centre_leave_the_region_whole_or_fall_back_to_the_points() {
+    // One block whose pose is looked at again (coverage forced), every pixel
+    // voting for its centre: the votes do not cut it; `Votes` then tries the
+    // 3D points, whose cut the two-copy terms refuse.
+    let l = l_block();
+    let truth = pose(10.0, [0.0, 0.0, 0.5]);
+    let frame = painted(render(&[(1, &l, truth)]));
+    let looked = RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT };
+    let run = |proposal| {
+        let config = RecutConfig { proposal, ..looked };
+        second_look_voted(&frame.view(), config, &mut Oracle(vec![truth]), Some(Votes(|_, _| centre_cell(0.0)))).stats
+    };
+    let only = run(CutProposal::VotesOnly);
+    assert_eq!((only.tried, only.by_votes, only.kept), (0, 0, 0), "votes-only: not cut");
+    let fallback = run(CutProposal::Votes);
+    assert_eq!((fallback.tried, fallback.by_votes, fallback.kept), (1, 0, 0), "votes: cut by points, refused");
+    assert_eq!(fallback.refused.iter().sum::<usize>(), 1, "the refusal is counted: {:?}", fallback.refused);
+}
+
+#[test]
+fn cut_proposals_parse_and_a_bad_one_names_the_choices() {
+    assert_eq!("votes".parse::<CutProposal>(), Ok(CutProposal::Votes));
+    assert_eq!("votes-only".parse::<CutProposal>(), Ok(CutProposal::VotesOnly));
+    assert_eq!("points".parse::<CutProposal>(), Ok(CutProposal::Points));
+    let err = "vote".parse::<CutProposal>().unwrap_err();
+    assert!(err.contains("points, votes or votes-only"), "{err}");
 }
 
 #[test]

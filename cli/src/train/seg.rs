@@ -138,6 +138,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         cast_augment: args.seg_cast,
         data_threads: args.seg_data_threads.map_or_else(fusepose_train::seeded_workers::default_threads, usize::from),
         offsets: args.seg_offsets,
+        offset_weight: args.seg_offset_weight,
         device: args.device,
         ..SegTrainConfig::default()
     };

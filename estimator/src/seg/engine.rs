@@ -13,7 +13,7 @@ use fusepose_scene::ObjectSet;
 use ndarray::{Array1, Array2, ArrayView2, ArrayViewMut2};
 
 use super::boundary::{Boundary, BoundaryScratch, refine};
-use super::config::{INPUT_CHANNELS, SegConfig};
+use super::config::{INPUT_CHANNELS, OFFSET_UNIT_CELLS, SegConfig};
 use super::depth_regions::DepthRegions;
 use super::file::{Certainty, SegFile};
 use super::input::FrameMap;
@@ -342,6 +342,25 @@ impl SegEngine {
     /// in units of [`super::config::OFFSET_UNIT_CELLS`] cells); empty without the offset head.
     pub fn offsets(&self) -> &[f32] {
         &self.offsets
+    }
+
+    /// The centre vote of the cell under frame pixel `(u, v)` in the last
+    /// segmentation: the cell's position plus its predicted offset, in output
+    /// cells (x, y). Pixels of one object vote for one point, whichever
+    /// voting mode is set. `None` without the offset head, before the first
+    /// segmentation, or off the frame.
+    pub fn vote_at(&self, u: usize, v: usize) -> Option<[f32; 2]> {
+        let map = self.map.as_ref().filter(|_| !self.offsets.is_empty())?;
+        let (w, h) = map.frame_size();
+        if u >= w || v >= h {
+            return None;
+        }
+        let (out_w, out_h) = map.grid_size();
+        let (cx, cy) = map.cell_of(u, v);
+        let i = cy * out_w + cx;
+        let (dx, dy) = (*self.offsets.get(i)?, *self.offsets.get(out_w * out_h + i)?);
+        let (dx, dy) = if dx.is_finite() && dy.is_finite() { (dx, dy) } else { (0.0, 0.0) };
+        Some([cx as f32 + dx * OFFSET_UNIT_CELLS, cy as f32 + dy * OFFSET_UNIT_CELLS])
     }
 
     /// Whether the file has the centre-offset head, i.e. [`SegEngine::segment_instances`]
