@@ -513,7 +513,7 @@ struct Runner {
     /// `--recut`: the second look and the network sibling that estimates its
     /// pieces; regions cut again and cuts kept.
     recut: Option<(fusepose_estimator::recut::Recut, Box<dyn Estimator>)>,
-    recut_stats: [usize; 7],
+    recut_stats: fusepose_estimator::recut::RecutStats,
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -682,7 +682,7 @@ impl Runner {
             alternates_kept: 0,
             class_means: Vec::new(),
             recut: recut_parts,
-            recut_stats: [0; 7],
+            recut_stats: Default::default(),
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -847,12 +847,7 @@ impl Runner {
             let verifier = self.verifier.as_mut().expect("recut runs only with verification");
             match recut.run(view, &mut self.workspace, &mut self.poses, &mut all, net.as_mut(), verifier, seg, seed) {
                 Ok(s) => {
-                    self.recut_stats[0] += s.tried;
-                    self.recut_stats[1] += s.kept;
-                    self.recut_stats[2] += s.by_votes;
-                    for (k, r) in s.refused.iter().enumerate() {
-                        self.recut_stats[3 + k] += r;
-                    }
+                    self.recut_stats += s;
                     if s.kept > 0 {
                         verdicts = all.into_iter().map(Some).collect();
                         passed = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
@@ -1012,7 +1007,8 @@ impl Runner {
             );
         }
         if self.recut.is_some() {
-            let [tried, kept, by_votes, unverified, close, explained, overlap] = self.recut_stats;
+            let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, refused, .. } = self.recut_stats;
+            let [unverified, close, explained, overlap] = refused;
             println!(
                 "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes), {kept} kept as two; \
                  refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap"

@@ -177,6 +177,20 @@ pub struct RecutStats {
     pub refused: [usize; 4],
 }
 
+/// Totals over frames (an evaluation's counts).
+impl std::ops::AddAssign for RecutStats {
+    fn add_assign(&mut self, o: Self) {
+        self.tried += o.tried;
+        self.kept += o.kept;
+        self.carried += o.carried;
+        self.deferred += o.deferred;
+        self.by_votes += o.by_votes;
+        for (r, n) in self.refused.iter_mut().zip(o.refused) {
+            *r += n;
+        }
+    }
+}
+
 /// Why a cut's pieces are not two copies (index into [`RecutStats::refused`]).
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 enum Refusal {
@@ -579,7 +593,7 @@ impl Recut {
                 let ones = cluster.iter().filter(|&&x| x == 1).count();
                 ones >= min && n - ones >= min
             };
-            let vote_centres = voter.and_then(|seg| {
+            let vote_cut = voter.and_then(|seg| {
                 self.sample_votes.clear();
                 for &[u, v] in &self.sample_pixels {
                     let [x, y] = seg.vote_at(u as usize, v as usize)?;
@@ -588,27 +602,28 @@ impl Recut {
                 let c = kmeans(&self.sample_votes, 2, &mut self.cluster[..n], &mut self.order);
                 let gap = ((c[0][0] - c[1][0]).powi(2) + (c[0][1] - c[1][1]).powi(2)).sqrt();
                 (gap >= MIN_VOTE_GAP_CELLS && even(&self.cluster[..n]))
-                    .then_some([[c[0][0], c[0][1]], [c[1][0], c[1][1]]])
+                    .then_some((seg, [[c[0][0], c[0][1]], [c[1][0], c[1][1]]]))
             });
             let base = 2 * kept as u16;
-            let centres = if let (Some(seg), Some(votes)) = (voter, vote_centres) {
+            let mut fill = |piece_of: &dyn Fn(usize, usize, usize) -> usize| {
+                for v in v0..=v1 {
+                    for u in u0..=u1 {
+                        let p = v * w + u;
+                        if in_region(p) {
+                            self.ids[p] = base + 1 + piece_of(u, v, p) as u16;
+                        }
+                    }
+                }
+            };
+            let centres = if let Some((seg, votes)) = vote_cut {
+                fill(&|u, v, _| seg.vote_at(u, v).map_or(0, |vote| nearest_2d(&votes, vote)));
+                by_votes += 1;
                 // The pieces' 3D centres (for the cut carried to the next frame).
                 let mut sums = [[0.0f32; 4]; 2];
                 for (p, &k) in self.samples.iter().zip(&self.cluster[..n]) {
                     let s = &mut sums[k.min(1) as usize];
                     *s = [s[0] + p[0], s[1] + p[1], s[2] + p[2], s[3] + 1.0];
                 }
-                for v in v0..=v1 {
-                    for u in u0..=u1 {
-                        let p = v * w + u;
-                        if !in_region(p) {
-                            continue;
-                        }
-                        let piece = seg.vote_at(u, v).map_or(0, |vote| nearest_2d(&votes, vote));
-                        self.ids[p] = base + 1 + piece as u16;
-                    }
-                }
-                by_votes += 1;
                 sums.map(|s| [s[0] / s[3], s[1] / s[3], s[2] / s[3]])
             } else {
                 if voter.is_some() && self.config.proposal == CutProposal::VotesOnly {
@@ -620,16 +635,7 @@ impl Recut {
                 }
                 let centres = [centres[0], centres[1]];
                 let pixels = [project(frame, Some(&centres[0])), project(frame, Some(&centres[1]))];
-                for v in v0..=v1 {
-                    for u in u0..=u1 {
-                        let p = v * w + u;
-                        if !in_region(p) {
-                            continue;
-                        }
-                        let piece = nearest_piece(frame, &centres, &pixels, p);
-                        self.ids[p] = base + 1 + piece as u16;
-                    }
-                }
+                fill(&|_, _, p| nearest_piece(frame, &centres, &pixels, p));
                 centres
             };
             self.classes[base as usize + 1] = pose.class_id;

@@ -472,11 +472,9 @@ impl Workspace {
             return;
         }
         let (w, h) = (frame.width(), frame.height());
-        let cap = w.div_ceil(SUPPORT_STRIDE) * h.div_ceil(SUPPORT_STRIDE);
-        if self.support_points.capacity() < cap {
-            self.support_points.reserve(cap - self.support_points.len());
-        }
+        // Sized on the first frame of a size; a no-op after.
         self.support_points.clear();
+        self.support_points.reserve(w.div_ceil(SUPPORT_STRIDE) * h.div_ceil(SUPPORT_STRIDE));
         for v in (SUPPORT_STRIDE / 2..h).step_by(SUPPORT_STRIDE) {
             for u in (SUPPORT_STRIDE / 2..w).step_by(SUPPORT_STRIDE) {
                 let p = v * w + u;
