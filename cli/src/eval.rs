@@ -388,16 +388,15 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
         }
         for runner in &mut runners {
-            let seg_engine = match (runner.masks, &net_masks) {
-                (MaskSource::Net, Some(seg)) => Some(seg.engine()),
-                _ => None,
-            };
-            let labels = match (runner.masks, &net_masks) {
-                (MaskSource::Net, Some(seg)) => seg.plane(),
-                (MaskSource::GtInstances, _) => {
-                    LabelPlane::Instances { ids: &frame.instances, classes: &frame.instance_classes }
+            let (labels, seg_engine) = match (runner.masks, net_masks.as_mut()) {
+                (MaskSource::Net, Some(seg)) => {
+                    let (plane, engine) = seg.plane_and_engine();
+                    (plane, Some(engine))
                 }
-                _ => LabelPlane::U16(&frame.labels),
+                (MaskSource::GtInstances, _) => {
+                    (LabelPlane::Instances { ids: &frame.instances, classes: &frame.instance_classes }, None)
+                }
+                _ => (LabelPlane::U16(&frame.labels), None),
             };
             runner.evaluate(&frame, labels, seg_engine, args.seed.wrapping_add(index as u64), &metrics)?;
         }
@@ -696,7 +695,7 @@ impl Runner {
         &mut self,
         frame: &EvalFrame,
         labels: LabelPlane<'_>,
-        seg: Option<&SegEngine>,
+        seg: Option<&mut SegEngine>,
         seed: u64,
         metrics: &[ObjectMetric],
     ) -> anyhow::Result<()> {
@@ -712,7 +711,8 @@ impl Runner {
         let prepared_ok = prepared.is_ok();
         self.joined += self.workspace.stats().joined_parts as usize;
         self.split += self.workspace.stats().split_regions as usize;
-        if let (true, Some(seg), Some(_)) = (prepared_ok && self.class_alternates > 0.0, seg, &self.verifier) {
+        if let (true, Some(seg), Some(_)) = (prepared_ok && self.class_alternates > 0.0, seg.as_deref(), &self.verifier)
+        {
             self.alternates_tried +=
                 alternates::mark(&mut self.workspace, seg, self.class_alternates, &mut self.class_means);
         }
@@ -790,7 +790,7 @@ impl Runner {
         &mut self,
         view: &FrameView<'_>,
         frame: &EvalFrame,
-        seg: Option<&SegEngine>,
+        seg: Option<&mut SegEngine>,
         metrics: &[ObjectMetric],
         seed: u64,
     ) {
@@ -801,6 +801,7 @@ impl Runner {
         let trace = std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some();
         // The segmenter's certainty is read only when judged or traced.
         let seg = seg.filter(|_| min_region_probability > 0.0 || trace);
+        let seg_ref = seg.as_deref();
         let mut verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
             .poses
             .as_slice()
@@ -810,7 +811,7 @@ impl Runner {
                     let mask = ws.mask_ref(id, p.bbox);
                     let mut v = verifier.verify(view, mask, p);
                     // Only the built-in segmenter's regions carry a class probability.
-                    if let Some(seg) = seg {
+                    if let Some(seg) = seg_ref {
                         v.judge_region_probability(
                             seg.region_probability(mask.ids, id, p.class_id, p.bbox),
                             min_region_probability,

@@ -157,6 +157,16 @@ pub struct Args {
     /// moving its class features far).
     #[arg(long, default_value_t = 1.0, value_parser = loss_weight)]
     pub seg_offset_weight: f64,
+    /// `--stage seg`: the centre-offset head reads its own 3x3 layer (a copy
+    /// of the last decoder layer) instead of the class features; a resumed
+    /// file without it gets one.
+    #[arg(long)]
+    pub seg_offset_branch: bool,
+    /// `--stage seg`: train only the centre-offset head (and branch) of a
+    /// resumed segmenter, on the offset loss alone; every other tensor, and so
+    /// every class output, stays exactly as it was. Needs `--resume`.
+    #[arg(long)]
+    pub seg_freeze_trunk: bool,
     /// `--stage seg`: threads rendering training frames (default: one per
     /// core; the frames, and so the trained weights, are the same for any count).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]
@@ -496,6 +506,14 @@ mod tests {
             let err = Cmd::try_parse_from(["train", flag.as_str()]).err().unwrap().to_string();
             assert!(err.contains("finite number >= 0"), "{bad}: {err}");
         }
+    }
+
+    #[test]
+    fn the_offset_branch_and_frozen_trunk_are_off_unless_asked() {
+        let plain = args(&[]);
+        assert!(!plain.seg_offset_branch && !plain.seg_freeze_trunk);
+        let asked = args(&["--seg-offset-branch", "--seg-freeze-trunk"]);
+        assert!(asked.seg_offset_branch && asked.seg_freeze_trunk);
     }
 
     #[test]

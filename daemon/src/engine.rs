@@ -787,7 +787,7 @@ impl PoseEngine {
                 let estimated = self.poses.len();
                 // The segmenter is shared by the cameras of this spec, which
                 // run one frame at a time: its logits are still this frame's.
-                let seg = self
+                let mut seg = self
                     .segmenter
                     .as_ref()
                     .filter(|_| used_segmenter)
@@ -823,7 +823,7 @@ impl PoseEngine {
                             n => recut.limit_next_frame(n),
                         }
                     }
-                    let (poses, verdicts, seg) = (&mut self.poses, &mut self.verdicts, seg.as_deref());
+                    let (poses, verdicts, seg) = (&mut self.poses, &mut self.verdicts, seg.as_deref_mut());
                     match recut.run(frame, ws, poses, verdicts, pieces.as_mut(), verifier, seg, seed) {
                         Ok(stats) => recut_tried = if stats.deferred == 0 { stats.tried } else { 0 },
                         Err(e) => {

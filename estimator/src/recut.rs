@@ -331,7 +331,8 @@ impl Recut {
     /// replaced by its pieces' poses (with their verdicts, appended) and
     /// `ws` holds the pieces as two instances. `segmenter`: the built-in
     /// segmenter when it made the regions (its certainty is judged on the
-    /// pieces as on any region, and its centre votes propose the cuts unless
+    /// pieces as on any region, and its centre votes, computed here where a
+    /// region is to be cut, propose the cuts unless
     /// [`Recut::set_votes`] gave others). `estimator` estimates the pieces; it should
     /// not be one that tracks objects across frames (its tracks would see
     /// only the pieces).
@@ -344,7 +345,7 @@ impl Recut {
         verdicts: &mut Vec<Verification>,
         estimator: &mut dyn Estimator,
         verifier: &mut Verifier,
-        segmenter: Option<&SegEngine>,
+        segmenter: Option<&mut SegEngine>,
         seed: u64,
     ) -> Result<RecutStats, EstimateError> {
         let mut stats = RecutStats::default();
@@ -367,8 +368,16 @@ impl Recut {
         if self.candidates.is_empty() {
             return Ok(stats);
         }
-        // Votes set from elsewhere, else the segmenter's where its file has the head.
+        // Votes set from elsewhere, else the segmenter's where its file has the
+        // head (computed now: a file with the offset branch leaves them to here).
         let own = self.votes.take();
+        let mut segmenter = segmenter;
+        if let Some(seg) =
+            segmenter.as_deref_mut().filter(|_| own.is_none() && self.config.proposal != CutProposal::Points)
+        {
+            seg.compute_votes();
+        }
+        let segmenter = segmenter.map(|s| &*s);
         let from_segmenter = segmenter.filter(|s| !s.offsets().is_empty()).map(|s| s as &dyn CentreVotes);
         let votes = own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter);
         stats.by_votes = self.cut(frame, ws, poses.as_slice(), votes);

@@ -13,6 +13,7 @@ use common::{BoxObject, SyntheticFrame, l_block, object_set, painted, render};
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutStats};
+use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
@@ -45,15 +46,17 @@ fn second_look(view: &FrameView<'_>, config: RecutConfig) -> Outcome {
 
 /// As [`second_look`], with `estimator` for the first estimate and the pieces.
 fn second_look_with(view: &FrameView<'_>, config: RecutConfig, estimator: &mut dyn Estimator) -> Outcome {
-    second_look_voted(view, config, estimator, None)
+    second_look_voted(view, config, estimator, None, None)
 }
 
-/// As [`second_look_with`], with centre votes for the cut.
+/// As [`second_look_with`], with centre votes for the cut, or a segmenter
+/// that made the regions.
 fn second_look_voted(
     view: &FrameView<'_>,
     config: RecutConfig,
     estimator: &mut dyn Estimator,
     votes: Option<Votes>,
+    segmenter: Option<&mut SegEngine>,
 ) -> Outcome {
     let objects = object_set(&[l_block()]);
     let ws_config = WorkspaceConfig { num_classes: 1, ..Default::default() };
@@ -75,7 +78,7 @@ fn second_look_voted(
     if let Some(votes) = votes {
         recut.set_votes(Box::new(votes));
     }
-    let stats = recut.run(view, &mut ws, &mut poses, &mut verdicts, estimator, &mut verifier, None, 7).unwrap();
+    let stats = recut.run(view, &mut ws, &mut poses, &mut verdicts, estimator, &mut verifier, segmenter, 7).unwrap();
     Outcome { poses, verdicts, stats, ws, before }
 }
 
@@ -130,7 +133,7 @@ fn votes_for_two_centres_cut_the_region_along_them() {
     let objects = object_set(&[l_block()]);
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
     let config = RecutConfig { proposal: CutProposal::VotesOnly, ..RecutConfig::DEFAULT };
-    let out = second_look_voted(&frame.view(), config, &mut icp, Some(votes));
+    let out = second_look_voted(&frame.view(), config, &mut icp, Some(votes), None);
     assert_eq!((out.before, out.stats.tried, out.stats.by_votes, out.stats.kept), (1, 1, 1, 1));
     let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
     xs.sort_by(f64::total_cmp);
@@ -155,13 +158,39 @@ fn votes_for_one_centre_leave_the_region_whole_or_fall_back_to_the_points() {
     let looked = RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT };
     let run = |proposal| {
         let config = RecutConfig { proposal, ..looked };
-        second_look_voted(&frame.view(), config, &mut Oracle(vec![truth]), Some(Votes(|_, _| centre_cell(0.0)))).stats
+        second_look_voted(&frame.view(), config, &mut Oracle(vec![truth]), Some(Votes(|_, _| centre_cell(0.0))), None)
+            .stats
     };
     let only = run(CutProposal::VotesOnly);
     assert_eq!((only.tried, only.by_votes, only.kept), (0, 0, 0), "votes-only: not cut");
     let fallback = run(CutProposal::Votes);
     assert_eq!((fallback.tried, fallback.by_votes, fallback.kept), (1, 0, 0), "votes: cut by points, refused");
     assert_eq!(fallback.refused.iter().sum::<usize>(), 1, "the refusal is counted: {:?}", fallback.refused);
+}
+
+/// A segmenter file with the offset branch computes its votes on demand: the
+/// second look asks for them where it cuts a region by votes, and only there.
+#[test]
+fn the_segmenters_votes_are_computed_where_a_region_is_cut() {
+    let l = l_block();
+    let objects = object_set(&[l_block()]);
+    let cfg = SegConfig { offset_branch: true, ..SegConfig::new(1) };
+    let file = SegFile::from_bytes(&common::seg_weight_bytes(&cfg, &objects)).unwrap();
+    let computed = |frame: &common::SyntheticFrame, proposal| {
+        let mut engine = SegEngine::new(&file).unwrap();
+        let mut labels = vec![0u16; frame.view().width() * frame.view().height()];
+        engine.segment(&frame.view(), &mut labels).unwrap();
+        assert!(engine.offsets().is_empty());
+        let config = RecutConfig { proposal, ..RecutConfig::DEFAULT };
+        let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+        let out = second_look_voted(&frame.view(), config, &mut icp, None, Some(&mut engine));
+        (out.stats.tried, !engine.offsets().is_empty())
+    };
+    let two = pair(&l);
+    assert_eq!(computed(&two, CutProposal::Votes), (1, true), "a region cut: votes computed");
+    assert_eq!(computed(&two, CutProposal::Points), (1, false), "cut by points: not computed");
+    let one = painted(render(&[(1, &l, pose(10.0, [0.0, 0.0, 0.5]))]));
+    assert_eq!(computed(&one, CutProposal::Votes), (0, false), "nothing to cut: not computed");
 }
 
 #[test]

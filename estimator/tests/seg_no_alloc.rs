@@ -9,15 +9,11 @@ mod common;
 
 use std::alloc::{GlobalAlloc, Layout, System};
 use std::cell::Cell;
-use std::collections::HashMap;
 
-use common::{l_block, object_set, step_block};
-use fusepose_estimator::net::meta::{self, object_entries};
-use fusepose_estimator::seg::file::{FORMAT, KEY_CONFIG};
+use common::{l_block, object_set, seg_weight_bytes as weight_bytes, step_block};
 use fusepose_estimator::seg::{DepthRegionParams, DepthRegions, FrameMap, SegConfig, SegEngine, SegFile};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, Workspace, WorkspaceConfig};
 use fusepose_scene::{Intrinsics, ObjectSet};
-use safetensors::tensor::{Dtype, TensorView};
 
 struct CountingAllocator;
 
@@ -61,37 +57,6 @@ fn allocations_in(f: impl FnOnce()) -> usize {
     f();
     COUNTING.with(|c| c.set(false));
     ALLOCATIONS.with(Cell::get)
-}
-
-/// A segmenter file with deterministic pseudo-random weights (no trainer needed).
-fn weight_bytes(cfg: &SegConfig, set: &ObjectSet) -> Vec<u8> {
-    let mut state = 0x9e37_79b9_7f4a_7c15u64;
-    let mut next = move || {
-        state ^= state << 13;
-        state ^= state >> 7;
-        state ^= state << 17;
-        (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
-    };
-    let shapes = cfg.tensor_shapes();
-    let data: Vec<Vec<u8>> = shapes
-        .iter()
-        .map(|(_, s)| {
-            let fan_in: usize = s.iter().skip(1).product::<usize>().max(1);
-            let scale = (6.0 / fan_in as f32).sqrt();
-            (0..s.iter().product::<usize>()).flat_map(|_| (next() * scale).to_le_bytes()).collect()
-        })
-        .collect();
-    let views: Vec<(String, TensorView<'_>)> = shapes
-        .iter()
-        .zip(&data)
-        .map(|((n, s), d)| (n.clone(), TensorView::new(Dtype::F32, s.clone(), d).unwrap()))
-        .collect();
-    let metadata = HashMap::from([
-        (meta::KEY_FORMAT.to_string(), FORMAT.to_string()),
-        (KEY_CONFIG.to_string(), serde_json::to_string(cfg).unwrap()),
-        (meta::KEY_OBJECTS.to_string(), serde_json::to_string(&object_entries(set)).unwrap()),
-    ]);
-    safetensors::serialize(views, Some(metadata)).unwrap()
 }
 
 fn engine(set: &ObjectSet) -> SegEngine {
@@ -223,6 +188,36 @@ fn a_background_offset_labels_more_cells_as_objects_and_zero_is_the_argmax() {
     engine.set_background_offset(f32::NAN);
     engine.segment(&view(&c, &d), &mut lifted).unwrap();
     assert_eq!(lifted, plain, "a NaN offset is refused as 0");
+}
+
+/// A file with the offset branch computes its votes only when asked
+/// (`compute_votes`, which the second look calls where it cuts) or when
+/// voting is on; the votes are never last frame's, and computing them
+/// allocates nothing.
+#[test]
+fn the_offset_branch_runs_on_demand_without_allocating() {
+    let set = object_set(&[l_block(), step_block()]);
+    let cfg = SegConfig { offset_branch: true, ..SegConfig::new(set.len()) };
+    let file = SegFile::from_bytes(&weight_bytes(&cfg, &set)).unwrap();
+    let mut engine = SegEngine::new(&file).unwrap();
+    let (c0, d0) = frame_planes(0);
+    let (c1, d1) = frame_planes(40);
+    let mut labels = vec![0u16; 640 * 480];
+    engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    assert!(engine.has_offset_head());
+    assert!(engine.offsets().is_empty() && engine.vote_at(300, 200).is_none(), "not computed unasked");
+    assert_eq!(allocations_in(|| engine.compute_votes()), 0);
+    let first = engine.offsets().to_vec();
+    assert_eq!(first.len(), 2 * 60 * 80);
+    assert!(first.iter().any(|&o| o != 0.0) && engine.vote_at(300, 200).is_some());
+    engine.segment(&view(&c1, &d1), &mut labels).unwrap();
+    assert!(engine.offsets().is_empty(), "a new frame's votes are not the last frame's");
+    engine.compute_votes();
+    assert_ne!(engine.offsets(), &first[..], "the new frame's votes");
+    // With voting on, `segment` computes them itself (it needs them).
+    engine.set_voting_mode(fusepose_estimator::seg::VotingMode::On(Default::default()));
+    engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    assert_eq!(engine.offsets(), &first[..]);
 }
 
 #[test]

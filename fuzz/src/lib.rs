@@ -856,6 +856,7 @@ pub fn seed_seg_config(classes: usize) -> fusepose_estimator::seg::SegConfig {
         enc: [1, 1, 1, 1],
         dec: [1, 1, 1],
         offsets: false,
+        offset_branch: false,
     }
 }
 

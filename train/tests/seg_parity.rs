@@ -330,3 +330,74 @@ fn segmenter_embeds_into_the_pose_network_file() {
     let err = embed(&std::fs::read(&other).unwrap(), &seg_file).unwrap_err();
     assert!(matches!(err, NetLoadError::ObjectMismatch { class: 2, what: "name", .. }), "{err}");
 }
+
+/// The offset branch (`o1` over d1's input, then the 1x1 offset head): the
+/// engine's offsets (computed on demand) and logits match burn's; a branch added to a trained file
+/// starts as a copy of `d1`; and training with the trunk frozen changes only
+/// the branch and the head, so every class output stays bit for bit.
+#[test]
+fn offset_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
+    use fusepose_train::seg::{SegTrainConfig, train_segmenter};
+    let set = three_objects();
+    let dir = Scratch::new("branch");
+    let cfg = SegConfig { offset_branch: true, ..SegConfig::new(3) };
+    let path = dir.path().join("branch.safetensors");
+    let mut net = SegNet::new(&cfg, &Device::flex());
+    assert!(net.o1.is_some());
+    net.offset = Some(burn::nn::conv::Conv2dConfig::new([cfg.dec[2], 2], [1, 1]).init(&Device::flex()));
+    store::save(&net, &cfg, &object_entries(&set), &TrainRecord::default(), &serde_json::json!({}), &path).unwrap();
+    let mut engine = SegEngine::load(&path, &set).unwrap();
+    let input = random_input(&cfg, 11);
+    let logits = engine.forward(&input).unwrap().to_vec();
+    let x = Tensor::<4>::from_data(TensorData::new(input, [1, 4, cfg.input_height, cfg.input_width]), &Device::flex());
+    let (burn_logits, offsets) = net.forward_all(x);
+    assert_close(&logits, &burn_logits.into_data().try_to_vec::<f32>().unwrap());
+    // The branch runs on demand (voting is off): no offsets until asked for.
+    assert!(engine.offsets().is_empty() && engine.has_offset_head());
+    engine.compute_votes();
+    assert_close(engine.offsets(), &offsets.unwrap().into_data().try_to_vec::<f32>().unwrap());
+
+    // A trained file without offsets: the branch starts as d1 and the head at zero.
+    let plain = SegConfig { offsets: false, ..SegConfig::new(3) };
+    let plain_path = dir.path().join("plain.safetensors");
+    save_random(&plain, &set, &plain_path);
+    let loaded = store::load(&plain_path, &Device::flex()).unwrap();
+    let d1 = loaded.net.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
+    let with = loaded.net.with_offset_branch(&cfg, &Device::flex());
+    let o1 = with.o1.as_ref().unwrap().weight.val().into_data().try_to_vec::<f32>().unwrap();
+    assert_eq!(d1, o1, "the branch starts as a copy of d1");
+
+    // Frozen training from the plain file: three steps on the offset loss alone.
+    let out = dir.path().join("frozen.safetensors");
+    let train = |resume: Option<std::path::PathBuf>| {
+        train_segmenter(SegTrainConfig {
+            objects: std::sync::Arc::new(set.clone()),
+            out: out.clone(),
+            minutes: None,
+            steps: Some(3),
+            resume,
+            batch: 2,
+            lr: 1e-2,
+            weight_frames: 2,
+            val_frames: 2,
+            data_threads: 1,
+            checkpoint_dir: dir.path().join("ck"),
+            progress: false,
+            offset_branch: true,
+            freeze_trunk: true,
+            ..SegTrainConfig::default()
+        })
+    };
+    let e = train(None).expect_err("freezing a fresh network is refused").to_string();
+    assert!(e.contains("--resume"), "{e}");
+    let report = train(Some(plain_path.clone())).unwrap();
+    assert!(report.config.offsets && report.config.offset_branch);
+    let (before, after) = (SegFile::read(&plain_path).unwrap(), SegFile::read(&out).unwrap());
+    for (name, _) in plain.tensor_shapes() {
+        assert_eq!(before.tensor(&name).unwrap(), after.tensor(&name).unwrap(), "{name} changed");
+    }
+    let head = after.tensor("offset.weight").unwrap();
+    assert!(head.iter().any(|&w| w != 0.0), "the offset head learned nothing");
+    let branch = after.tensor("o1.weight").unwrap();
+    assert_ne!(branch, before.tensor("d1.weight").unwrap(), "the branch learned nothing");
+}

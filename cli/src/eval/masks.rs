@@ -121,18 +121,16 @@ impl NetMasks {
         Ok(())
     }
 
-    /// The label plane of the last segmented frame, as the estimator takes it.
-    /// The engine after the last [`NetMasks::segment`] (its logits describe that frame).
-    pub fn engine(&self) -> &SegEngine {
-        &self.engine
-    }
-
-    pub fn plane(&self) -> fusepose_estimator::LabelPlane<'_> {
-        if self.classes.is_empty() {
+    /// The label plane of the last segmented frame, as the estimator takes
+    /// it, and the engine after that frame (its logits describe it; the
+    /// second look computes its votes on demand).
+    pub fn plane_and_engine(&mut self) -> (fusepose_estimator::LabelPlane<'_>, &mut SegEngine) {
+        let plane = if self.classes.is_empty() {
             fusepose_estimator::LabelPlane::U16(&self.labels)
         } else {
             fusepose_estimator::LabelPlane::Instances { ids: &self.labels, classes: &self.classes }
-        }
+        };
+        (plane, &mut self.engine)
     }
 
     /// Prints mIoU, per-class IoU and the time per frame.

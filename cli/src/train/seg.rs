@@ -139,6 +139,8 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         data_threads: args.seg_data_threads.map_or_else(fusepose_train::seeded_workers::default_threads, usize::from),
         offsets: args.seg_offsets,
         offset_weight: args.seg_offset_weight,
+        offset_branch: args.seg_offset_branch,
+        freeze_trunk: args.seg_freeze_trunk,
         device: args.device,
         ..SegTrainConfig::default()
     };

@@ -9,7 +9,10 @@
 //! With [`SegConfig::offsets`], a second 1x1 head `offset` (`dec[2] → 2`) predicts
 //! each cell's offset to the centre of its object instance (x then y, in units
 //! of [`OFFSET_UNIT_CELLS`] output cells), which separates touching objects of
-//! one class (centre-offset voting, as in Panoptic-DeepLab and PVN3D).
+//! one class (centre-offset voting, as in Panoptic-DeepLab and PVN3D). With
+//! [`SegConfig::offset_branch`] the offset head reads its own 3x3 layer `o1`
+//! (same input and width as `d1`) instead of `d1`, so offsets can be trained
+//! onto a finished segmenter without touching its class outputs.
 
 use serde::{Deserialize, Serialize};
 
@@ -36,6 +39,10 @@ pub struct SegConfig {
     /// before it existed read as `false`).
     #[serde(default)]
     pub offsets: bool,
+    /// Whether the offset head has its own layer `o1` (over `d1`'s input)
+    /// rather than reading `d1` (files written before it existed read as `false`).
+    #[serde(default)]
+    pub offset_branch: bool,
 }
 
 /// Size of a 3x3, padding-1 convolution's output along one axis.
@@ -55,6 +62,7 @@ impl SegConfig {
             enc: [16, 32, 64, 64],
             dec: [32, 16, 16],
             offsets: true,
+            offset_branch: false,
         }
     }
 
@@ -109,6 +117,9 @@ impl SegConfig {
             ("d1", d2 + c1, d1, 3, 1),
             ("head", d1, self.outputs(), 1, 1),
         ];
+        if self.offsets && self.offset_branch {
+            layers.push(("o1", d2 + c1, d1, 3, 1));
+        }
         if self.offsets {
             layers.push(("offset", d1, 2, 1, 1));
         }
@@ -135,7 +146,7 @@ impl SegConfig {
         let s = self.sizes();
         let at = |level: usize| s[level].0 * s[level].1;
         // Output resolution of each layer in `layers()` order.
-        let levels = [1, 2, 3, 4, 3, 2, 1, 1, 1];
+        let levels = [1, 2, 3, 4, 3, 2, 1, 1, 1, 1];
         self.layers().into_iter().zip(levels).map(|((_, i, o, k, _), l)| at(l) * o * i * k * k).sum()
     }
 }
@@ -167,6 +178,15 @@ mod tests {
         assert_eq!(with.tensor_shapes().len(), 18);
         assert_eq!(with.tensor_shapes()[16], ("offset.weight".to_string(), vec![2, 16, 1, 1]));
         assert_eq!(with.macs(), expect + 4800 * 2 * 16);
+        // The branch: `o1` like d1 (4800*16*288) before the offset head.
+        let branch = SegConfig { offset_branch: true, ..SegConfig::new(8) };
+        assert_eq!(branch.tensor_shapes().len(), 20);
+        assert_eq!(branch.tensor_shapes()[16], ("o1.weight".to_string(), vec![16, 32, 3, 3]));
+        assert_eq!(branch.tensor_shapes()[18], ("offset.weight".to_string(), vec![2, 16, 1, 1]));
+        assert_eq!(branch.macs(), expect + 4800 * 16 * 288 + 4800 * 2 * 16);
+        // A branch without the head is no layer at all.
+        let no_head = SegConfig { offsets: false, offset_branch: true, ..SegConfig::new(8) };
+        assert_eq!(no_head.layers().len(), 8);
     }
 
     #[test]

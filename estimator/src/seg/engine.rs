@@ -194,7 +194,7 @@ pub(crate) fn softmax_terms(classes: usize, logit: impl Fn(usize) -> f32) -> (f3
 pub struct SegEngine {
     config: SegConfig,
     objects: Vec<ObjectEntry>,
-    /// e1, e2, e3, e4, d3, d2, d1, head, then `offset` when the file has it.
+    /// e1, e2, e3, e4, d3, d2, d1, head, then `o1` and `offset` when the file has them.
     layers: Vec<Layer>,
     /// `[4, H0*W0]`.
     input: Vec<f32>,
@@ -210,6 +210,10 @@ pub struct SegEngine {
     d1: Vec<f32>,
     /// `[K+1, H1*W1]`.
     logits: Vec<f32>,
+    /// `[d1, H1*W1]`: the offset branch's features when the file has it, else empty.
+    o1: Vec<f32>,
+    /// Whether `offsets` are not yet those of the last forward pass ([`SegEngine::compute_votes`]).
+    votes_pending: bool,
     /// `[2, H1*W1]`: centre offsets (x, y) when the file has the offset head, else empty.
     offsets: Vec<f32>,
     /// Instance id per cell of the last [`SegEngine::segment_instances`].
@@ -295,6 +299,8 @@ impl SegEngine {
             d1: vec![0.0; d1 * hw(1)],
             logits: vec![0.0; c.outputs() * hw(1)],
             offsets: if c.offsets { vec![0.0; 2 * hw(1)] } else { Vec::new() },
+            o1: if c.offsets && c.offset_branch { vec![0.0; d1 * hw(1)] } else { Vec::new() },
+            votes_pending: false,
             cell_ids: vec![0; hw(1)],
             instance_classes: Vec::with_capacity(hw(1) + 1),
             voting: Voting::new(s[1].1, s[1].0, VotingParams::default()),
@@ -339,9 +345,16 @@ impl SegEngine {
     }
 
     /// Centre offsets of the last forward pass, `[2, out_h * out_w]` (x then y,
-    /// in units of [`super::config::OFFSET_UNIT_CELLS`] cells); empty without the offset head.
+    /// in units of [`super::config::OFFSET_UNIT_CELLS`] cells); empty without the
+    /// offset head, and for the offset branch until [`SegEngine::compute_votes`].
     pub fn offsets(&self) -> &[f32] {
-        &self.offsets
+        if self.votes_pending { &[] } else { &self.offsets }
+    }
+
+    /// Whether the file has the centre-offset head (its votes may still have
+    /// to be computed: [`SegEngine::compute_votes`]).
+    pub fn has_offset_head(&self) -> bool {
+        self.config.offsets
     }
 
     /// The centre vote of the cell under frame pixel `(u, v)` in the last
@@ -350,7 +363,7 @@ impl SegEngine {
     /// voting mode is set. `None` without the offset head, before the first
     /// segmentation, or off the frame.
     pub fn vote_at(&self, u: usize, v: usize) -> Option<[f32; 2]> {
-        let map = self.map.as_ref().filter(|_| !self.offsets.is_empty())?;
+        let map = self.map.as_ref().filter(|_| !self.offsets().is_empty())?;
         let (w, h) = map.frame_size();
         if u >= w || v >= h {
             return None;
@@ -752,13 +765,41 @@ impl SegEngine {
         let x = ArrayView2::from_shape((d1c, hw(1)), &self.d1[..]).expect("d1 buffer");
         let mut out = ArrayViewMut2::from_shape((k, hw(1)), &mut self.logits[..]).expect("logits buffer");
         gemm_acc(head.w.view(), x, &mut out);
-        if let Some(offset) = l.get(8) {
-            for (row, &b) in self.offsets.chunks_exact_mut(hw(1)).zip(offset.b.iter()) {
-                row.fill(b);
-            }
-            let mut out = ArrayViewMut2::from_shape((2, hw(1)), &mut self.offsets[..]).expect("offset buffer");
-            gemm_acc(offset.w.view(), x, &mut out);
+        self.votes_pending = self.config.offsets;
+        // A head on `d1` costs little and is computed now; the branch (as much
+        // as `d1` itself) only when voting is on or votes are asked for.
+        if self.config.offsets && (!self.config.offset_branch || self.use_offsets) {
+            self.compute_votes();
         }
+    }
+
+    /// Computes the centre offsets of the last forward pass where they are
+    /// not yet (a file with the offset branch computes them on demand: the
+    /// branch costs about as much as the last decoder layer, and the second
+    /// look asks for them only in frames where it cuts). Reads `d1`, or
+    /// `cat1` for the branch, which hold the last frame's values until the
+    /// next forward pass.
+    pub fn compute_votes(&mut self) {
+        if !self.votes_pending {
+            return;
+        }
+        self.votes_pending = false;
+        let s = self.config.sizes();
+        let hw = s[1].0 * s[1].1;
+        let (c1, [_, d2c, d1c]) = (self.config.enc[0], self.config.dec);
+        let (offset, x) = if self.config.offset_branch {
+            let o1 = &self.layers[8];
+            let view = ArrayViewMut2::from_shape((d1c, hw), &mut self.o1[..]).expect("o1 buffer");
+            conv3x3(&self.cat1, d2c + c1, s[1].0, s[1].1, 1, o1.w.view(), o1.b.view(), &mut self.cols, view);
+            (&self.layers[9], ArrayView2::from_shape((d1c, hw), &self.o1[..]).expect("o1 buffer"))
+        } else {
+            (&self.layers[8], ArrayView2::from_shape((d1c, hw), &self.d1[..]).expect("d1 buffer"))
+        };
+        for (row, &b) in self.offsets.chunks_exact_mut(hw).zip(offset.b.iter()) {
+            row.fill(b);
+        }
+        let mut out = ArrayViewMut2::from_shape((2, hw), &mut self.offsets[..]).expect("offset buffer");
+        gemm_acc(offset.w.view(), x, &mut out);
     }
 
     /// Per-cell argmax of the logits (first maximum wins; NaN never wins).

@@ -3,9 +3,15 @@
 
 #![allow(dead_code)]
 
+use std::collections::HashMap;
+
+use fusepose_estimator::net::meta::{self, object_entries};
+use fusepose_estimator::seg::SegConfig;
+use fusepose_estimator::seg::file::{FORMAT, KEY_CONFIG};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane};
 use fusepose_scene::{Intrinsics, Mesh, ObjectModel, ObjectSet, Pose, Symmetry};
 use nalgebra::{Point3, Vector3};
+use safetensors::tensor::{Dtype, TensorView};
 
 /// An object as a union of boxes `[min, max]` (object frame, metres).
 #[derive(Clone, Debug)]
@@ -193,4 +199,35 @@ pub fn painted(mut frame: SyntheticFrame) -> SyntheticFrame {
 /// Rotation angle between two rotations, degrees.
 pub fn angle_deg(a: &nalgebra::UnitQuaternion<f64>, b: &nalgebra::UnitQuaternion<f64>) -> f64 {
     a.angle_to(b).to_degrees()
+}
+
+/// A segmenter file with deterministic pseudo-random weights (no trainer needed).
+pub fn seg_weight_bytes(cfg: &SegConfig, set: &ObjectSet) -> Vec<u8> {
+    let mut state = 0x9e37_79b9_7f4a_7c15u64;
+    let mut next = move || {
+        state ^= state << 13;
+        state ^= state >> 7;
+        state ^= state << 17;
+        (state >> 40) as f32 / (1u64 << 24) as f32 - 0.5
+    };
+    let shapes = cfg.tensor_shapes();
+    let data: Vec<Vec<u8>> = shapes
+        .iter()
+        .map(|(_, s)| {
+            let fan_in: usize = s.iter().skip(1).product::<usize>().max(1);
+            let scale = (6.0 / fan_in as f32).sqrt();
+            (0..s.iter().product::<usize>()).flat_map(|_| (next() * scale).to_le_bytes()).collect()
+        })
+        .collect();
+    let views: Vec<(String, TensorView<'_>)> = shapes
+        .iter()
+        .zip(&data)
+        .map(|((n, s), d)| (n.clone(), TensorView::new(Dtype::F32, s.clone(), d).unwrap()))
+        .collect();
+    let metadata = HashMap::from([
+        (meta::KEY_FORMAT.to_string(), FORMAT.to_string()),
+        (KEY_CONFIG.to_string(), serde_json::to_string(cfg).unwrap()),
+        (meta::KEY_OBJECTS.to_string(), serde_json::to_string(&object_entries(set)).unwrap()),
+    ]);
+    safetensors::serialize(views, Some(metadata)).unwrap()
 }

@@ -3,7 +3,7 @@
 //! [`SegConfig`]; the inference engine (`fusepose_estimator::seg::engine`)
 //! mirrors [`SegNet::forward`] operation for operation.
 
-use burn::module::Module;
+use burn::module::{Module, Param};
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
 use burn::prelude::{Device, Tensor};
@@ -21,7 +21,8 @@ fn conv(i: usize, o: usize, k: usize, stride: usize, device: &Device) -> Conv2d 
 }
 
 /// Encoder `e1..e4` (stride 2), decoder `d3, d2, d1` over `cat(up(prev), skip)`, 1x1 `head`,
-/// and the optional 1x1 centre-offset head `offset` ([`SegConfig::offsets`]).
+/// the optional 1x1 centre-offset head `offset` ([`SegConfig::offsets`]) and
+/// the optional branch `o1` it then reads instead of `d1` ([`SegConfig::offset_branch`]).
 #[derive(Module, Debug)]
 pub struct SegNet {
     pub e1: Conv2d,
@@ -32,6 +33,7 @@ pub struct SegNet {
     pub d2: Conv2d,
     pub d1: Conv2d,
     pub head: Conv2d,
+    pub o1: Option<Conv2d>,
     pub offset: Option<Conv2d>,
 }
 
@@ -42,7 +44,7 @@ fn up(x: Tensor<4>, like: &Tensor<4>) -> Tensor<4> {
 
 impl SegNet {
     pub fn new(c: &SegConfig, device: &Device) -> Self {
-        let mut layers = c.layers().into_iter().take(8).map(|(_, i, o, k, s)| conv(i, o, k, s, device));
+        let mut layers = c.layers().into_iter().take(9).map(|(_, i, o, k, s)| conv(i, o, k, s, device));
         let mut next = || layers.next().expect("SegConfig::layers has eight layers");
         Self {
             e1: next(),
@@ -53,8 +55,24 @@ impl SegNet {
             d2: next(),
             d1: next(),
             head: next(),
+            o1: (c.offsets && c.offset_branch).then(&mut next),
             offset: c.offsets.then(|| offset_head(c, device)),
         }
+    }
+
+    /// Adds the offset branch `o1`, a copy of `d1` (so the branch starts with
+    /// the class features the head could already read), and a fresh offset
+    /// head over it, replacing a head that read `d1`. With `forward_parts(x,
+    /// true)` and the offset loss alone, only these two layers learn.
+    pub fn with_offset_branch(mut self, c: &SegConfig, device: &Device) -> Self {
+        if self.o1.is_none() {
+            let mut o1 = conv(c.dec[1] + c.enc[0], c.dec[2], 3, 1, device);
+            o1.weight = Param::from_tensor(self.d1.weight.val());
+            o1.bias = self.d1.bias.as_ref().map(|b| Param::from_tensor(b.val()));
+            self.o1 = Some(o1);
+            self.offset = Some(offset_head(c, device));
+        }
+        self
     }
 
     /// Adds a freshly initialised offset head to a network loaded without one
@@ -66,6 +84,25 @@ impl SegNet {
         self
     }
 
+    /// Stops gradient tracking for every layer but the offset branch and head,
+    /// so a step on the offset loss alone neither changes nor records the
+    /// trunk (an autodiff graph of layers no loss reaches is never freed).
+    pub fn frozen_trunk(mut self) -> Self {
+        for layer in [
+            &mut self.e1,
+            &mut self.e2,
+            &mut self.e3,
+            &mut self.e4,
+            &mut self.d3,
+            &mut self.d2,
+            &mut self.d1,
+            &mut self.head,
+        ] {
+            *layer = layer.clone().no_grad();
+        }
+        self
+    }
+
     /// `x [B, 4, H0, W0]` → logits `[B, K+1, H1, W1]` (half resolution).
     pub fn forward(&self, x: Tensor<4>) -> Tensor<4> {
         self.forward_all(x).0
@@ -73,14 +110,27 @@ impl SegNet {
 
     /// Logits and, with the offset head, centre offsets `[B, 2, H1, W1]`.
     pub fn forward_all(&self, x: Tensor<4>) -> (Tensor<4>, Option<Tensor<4>>) {
+        self.forward_parts(x, false)
+    }
+
+    /// As [`SegNet::forward_all`]; with `detach_trunk` the offset branch reads
+    /// its input detached, so a loss on the offsets alone trains `o1` and
+    /// `offset` and leaves every other tensor as it was.
+    pub fn forward_parts(&self, x: Tensor<4>, detach_trunk: bool) -> (Tensor<4>, Option<Tensor<4>>) {
         let e1 = relu(self.e1.forward(x));
         let e2 = relu(self.e2.forward(e1.clone()));
         let e3 = relu(self.e3.forward(e2.clone()));
         let e4 = relu(self.e4.forward(e3.clone()));
         let d3 = relu(self.d3.forward(Tensor::cat(vec![up(e4, &e3), e3], 1)));
         let d2 = relu(self.d2.forward(Tensor::cat(vec![up(d3, &e2), e2], 1)));
-        let d1 = relu(self.d1.forward(Tensor::cat(vec![up(d2, &e1), e1], 1)));
-        let offsets = self.offset.as_ref().map(|o| o.forward(d1.clone()));
+        let cat1 = Tensor::cat(vec![up(d2, &e1), e1], 1);
+        let d1 = relu(self.d1.forward(cat1.clone()));
+        let features = match &self.o1 {
+            Some(o1) => Some(relu(o1.forward(if detach_trunk { cat1.detach() } else { cat1 }))),
+            None if detach_trunk => Some(d1.clone().detach()),
+            None => Some(d1.clone()),
+        };
+        let offsets = self.offset.as_ref().zip(features).map(|(o, f)| o.forward(f));
         (self.head.forward(d1), offsets)
     }
 }

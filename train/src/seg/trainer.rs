@@ -73,6 +73,13 @@ pub struct SegTrainConfig {
     pub offsets: bool,
     /// Weight of the offset loss beside the cross-entropy.
     pub offset_weight: f64,
+    /// The offset head reads its own layer `o1` ([`SegConfig::offset_branch`]);
+    /// a resumed file without the branch gets one, copied from `d1`.
+    pub offset_branch: bool,
+    /// Train the offset head (and branch) alone on a resumed segmenter: the
+    /// loss is the offset loss, the branch reads the trunk detached, and every
+    /// other tensor stays bit for bit as it was (its class outputs unchanged).
+    pub freeze_trunk: bool,
     /// Largest lift of a small object region's cells in the cross-entropy
     /// ([`small_region_weights`], reference [`SMALL_REGION_CELLS`]); 1 = off.
     pub small_region_boost: f32,
@@ -110,6 +117,8 @@ impl Default for SegTrainConfig {
             progress: true,
             offsets: true,
             offset_weight: 1.0,
+            offset_branch: false,
+            freeze_trunk: false,
             small_region_boost: 1.0,
             sampler: fusepose_scene::sampler::SamplerConfig::training(),
             cast_augment: 0.0,
@@ -164,6 +173,8 @@ fn hyper_json(cfg: &SegTrainConfig, weights: &[f32]) -> serde_json::Value {
         "camera_cast": cfg.cast_augment,
         "offsets": cfg.offsets,
         "offset_weight": cfg.offset_weight,
+        "offset_branch": cfg.offset_branch,
+        "freeze_trunk": cfg.freeze_trunk,
         "small_region_boost": cfg.small_region_boost,
         "small_region_cells": SMALL_REGION_CELLS,
         "data": format!(
@@ -198,22 +209,36 @@ fn recv_patiently(stream: &mut SegStream, warn_after: Duration) -> anyhow::Resul
 /// A segmenter for `num_classes` classes with the architecture of the one
 /// in `path` (a segmenter file or a pose-network file with one embedded) and
 /// every tensor of it whose name and shape fit copied
-/// ([`crate::warm_start::copy_fitting`]); the class head stays fresh.
+/// ([`crate::warm_start::copy_fitting`]); the class head stays fresh. The
+/// offset head (with `offsets`) reads `d1`, or the branch with `branch`; a
+/// source head of the other kind is not copied, so it starts at zero.
 pub fn warm_start(
     path: &std::path::Path,
     num_classes: usize,
     offsets: bool,
+    branch: bool,
     device: &Device,
 ) -> anyhow::Result<(SegNet, SegConfig, WarmStart)> {
     let source =
         store::load(path, device).with_context(|| format!("reading the warm-start segmenter {}", path.display()))?;
     let mut source_net = source.net;
     let mut arch = SegConfig { num_classes, ..source.file.config.clone() };
+    if arch.offsets && arch.offset_branch != branch {
+        source_net.o1 = None;
+        source_net.offset = None;
+        arch.offsets = false;
+        arch.offset_branch = false;
+    }
     if offsets && !arch.offsets {
         arch.offsets = true;
         source_net = source_net.with_offset_head(&arch, device);
     }
+    if offsets && branch && !arch.offset_branch {
+        arch.offset_branch = true;
+        source_net = source_net.with_offset_branch(&arch, device);
+    }
     arch.offsets = offsets;
+    arch.offset_branch = offsets && branch;
     arch.validate().map_err(|m| anyhow::anyhow!("architecture: {m}"))?;
     let mut net = SegNet::new(&arch, device);
     let copied = crate::warm_start::copy_fitting(&mut net, &source_net, path)?;
@@ -231,6 +256,12 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     }
     if cfg.minutes.is_none() && cfg.steps.is_none() {
         bail!("give a time (minutes) or step budget");
+    }
+    if cfg.freeze_trunk && (!cfg.offsets || cfg.resume.is_none()) {
+        bail!(
+            "freezing the trunk trains the centre-offset head alone: it needs the offsets on and a trained \
+             segmenter to resume (--resume FILE)"
+        );
     }
     let device = cfg.device.autodiff()?;
     device.seed(cfg.seed);
@@ -268,21 +299,27 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
             let mut arch = loaded.file.config.clone();
             let mut net = loaded.net;
             // A run that trains (not `--steps 0`, which only re-validates or embeds) adds the head.
-            if cfg.offsets && !arch.offsets && cfg.steps.is_none_or(|s| s > record.steps) {
+            let trains = cfg.steps.is_none_or(|s| s > record.steps);
+            if cfg.offsets && !arch.offsets && trains {
                 arch.offsets = true;
                 net = net.with_offset_head(&arch, &device);
+            }
+            if cfg.offsets && cfg.offset_branch && !arch.offset_branch && trains {
+                arch.offset_branch = true;
+                net = net.with_offset_branch(&arch, &device);
             }
             (net, arch, record)
         }
         None if cfg.warm_start.is_some() => {
             let path = cfg.warm_start.as_ref().expect("checked");
-            let (net, arch, w) = warm_start(path, set.len(), cfg.offsets, &device)?;
+            let (net, arch, w) = warm_start(path, set.len(), cfg.offsets, cfg.offset_branch, &device)?;
             log.line(&w.log_line(path));
             (net, arch, TrainRecord { seed: cfg.seed, ..TrainRecord::default() })
         }
         None => {
             let mut arch = cfg.arch.clone().unwrap_or_else(|| SegConfig::new(set.len()));
             arch.offsets = cfg.offsets;
+            arch.offset_branch = cfg.offsets && cfg.offset_branch;
             arch.validate().map_err(|m| anyhow::anyhow!("architecture: {m}"))?;
             if arch.num_classes != set.len() {
                 bail!("architecture has {} classes, the object set {}", arch.num_classes, set.len());
@@ -290,6 +327,9 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
             (SegNet::new(&arch, &device), arch, TrainRecord { seed: cfg.seed, ..TrainRecord::default() })
         }
     };
+    if cfg.freeze_trunk {
+        net = net.frozen_trunk();
+    }
     record.batch = cfg.batch;
     record.data = "builtin scene sampler, rendered on the fly with sensor noise".into();
     let start_steps = record.steps;
@@ -384,16 +424,26 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
             &device,
         );
         let target: Vec<u16> = batch.iter().flat_map(|s| s.target.iter().copied()).collect();
-        let (logits, offsets) = net.forward_all(input);
+        let (logits, offsets) = net.forward_parts(input, cfg.freeze_trunk);
         let [_, _, h1, w1] = logits.dims();
-        let scale = (cfg.small_region_boost > 1.0)
-            .then(|| small_region_weights(&target, w1, h1, SMALL_REGION_CELLS, cfg.small_region_boost));
-        let mut loss = weighted_cross_entropy_scaled(logits, &target, &weights, scale.as_deref());
-        if let Some(pred) = offsets {
+        let offset_loss = offsets.map(|pred| {
             let t: Vec<f32> = batch.iter().flat_map(|s| s.offsets.iter().copied()).collect();
             let m: Vec<f32> = batch.iter().flat_map(|s| s.offset_mask.iter().copied()).collect();
-            loss = loss + offset_l1(pred, &t, &m).mul_scalar(cfg.offset_weight);
-        }
+            offset_l1(pred, &t, &m).mul_scalar(cfg.offset_weight)
+        });
+        let loss = match offset_loss {
+            // Frozen: the class loss would train the trunk, so it is left out.
+            Some(o) if cfg.freeze_trunk => o,
+            offset_loss => {
+                let scale = (cfg.small_region_boost > 1.0)
+                    .then(|| small_region_weights(&target, w1, h1, SMALL_REGION_CELLS, cfg.small_region_boost));
+                let ce = weighted_cross_entropy_scaled(logits, &target, &weights, scale.as_deref());
+                match offset_loss {
+                    Some(o) => ce + o,
+                    None => ce,
+                }
+            }
+        };
         let lv = loss.clone().into_data().try_to_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN)
             as f64;
         if !lv.is_finite() {
@@ -482,7 +532,7 @@ mod tests {
         let objects = object_entries(&builtin_objects());
         store::save(&source, &eight, &objects, &TrainRecord::default(), &serde_json::json!({}), &path).unwrap();
 
-        let (net, arch, w) = warm_start(&path, 3, true, &device).unwrap();
+        let (net, arch, w) = warm_start(&path, 3, true, false, &device).unwrap();
         let (copied, fresh) = (w.copied, w.fresh);
         assert_eq!((arch.num_classes, arch.offsets), (3, true));
         assert!(copied > 0 && !fresh.is_empty(), "copied {copied}, fresh {fresh:?}");
@@ -500,6 +550,30 @@ mod tests {
                 assert_eq!(Some(&now), src.get(&t.name), "{} copied", t.name);
             }
         }
+        let _ = std::fs::remove_dir_all(dir);
+    }
+
+    /// A source whose offset head reads the branch (the shipped segmenter's
+    /// kind) warm-starts a plain head at zero, as a source without a head
+    /// does, and a branch run with its branch and head copied.
+    #[test]
+    fn warm_start_copies_an_offset_head_only_of_the_same_kind() {
+        let device = Device::default();
+        let branched = SegConfig { offset_branch: true, ..SegConfig::new(8) };
+        let mut source = SegNet::new(&branched, &device);
+        source.offset = Some(burn::nn::conv::Conv2dConfig::new([branched.dec[2], 2], [1, 1]).init(&device));
+        let dir = std::env::temp_dir().join(format!("fusepose-seg-warm-branch-{}", std::process::id()));
+        let path = dir.join("seg8.safetensors");
+        let objects = object_entries(&builtin_objects());
+        store::save(&source, &branched, &objects, &TrainRecord::default(), &serde_json::json!({}), &path).unwrap();
+        let values = |c: &burn::nn::conv::Conv2d| c.weight.val().into_data().try_to_vec::<f32>().unwrap();
+        let (plain, arch, _) = warm_start(&path, 3, true, false, &device).unwrap();
+        assert!(arch.offsets && !arch.offset_branch && plain.o1.is_none());
+        assert!(values(plain.offset.as_ref().unwrap()).iter().all(|&w| w == 0.0), "a fresh head starts at zero");
+        let (with, arch, _) = warm_start(&path, 3, true, true, &device).unwrap();
+        assert!(arch.offsets && arch.offset_branch);
+        assert_eq!(values(with.o1.as_ref().unwrap()), values(source.o1.as_ref().unwrap()));
+        assert_eq!(values(with.offset.as_ref().unwrap()), values(source.offset.as_ref().unwrap()));
         let _ = std::fs::remove_dir_all(dir);
     }
 }
