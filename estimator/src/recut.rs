@@ -345,7 +345,7 @@ impl Recut {
         verdicts: &mut Vec<Verification>,
         estimator: &mut dyn Estimator,
         verifier: &mut Verifier,
-        segmenter: Option<&mut SegEngine>,
+        mut segmenter: Option<&mut SegEngine>,
         seed: u64,
     ) -> Result<RecutStats, EstimateError> {
         let mut stats = RecutStats::default();
@@ -371,13 +371,12 @@ impl Recut {
         // Votes set from elsewhere, else the segmenter's where its file has the
         // head (computed now: a file with the offset branch leaves them to here).
         let own = self.votes.take();
-        let mut segmenter = segmenter;
         if let Some(seg) =
             segmenter.as_deref_mut().filter(|_| own.is_none() && self.config.proposal != CutProposal::Points)
         {
             seg.compute_votes();
         }
-        let segmenter = segmenter.map(|s| &*s);
+        let segmenter = segmenter.as_deref();
         let from_segmenter = segmenter.filter(|s| !s.offsets().is_empty()).map(|s| s as &dyn CentreVotes);
         let votes = own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter);
         stats.by_votes = self.cut(frame, ws, poses.as_slice(), votes);

@@ -204,7 +204,7 @@ fn the_offset_branch_runs_on_demand_without_allocating() {
     let (c1, d1) = frame_planes(40);
     let mut labels = vec![0u16; 640 * 480];
     engine.segment(&view(&c0, &d0), &mut labels).unwrap();
-    assert!(engine.has_offset_head());
+    assert!(engine.config().offsets);
     assert!(engine.offsets().is_empty() && engine.vote_at(300, 200).is_none(), "not computed unasked");
     assert_eq!(allocations_in(|| engine.compute_votes()), 0);
     let first = engine.offsets().to_vec();

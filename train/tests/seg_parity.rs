@@ -353,7 +353,7 @@ fn offset_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
     let (burn_logits, offsets) = net.forward_all(x);
     assert_close(&logits, &burn_logits.into_data().try_to_vec::<f32>().unwrap());
     // The branch runs on demand (voting is off): no offsets until asked for.
-    assert!(engine.offsets().is_empty() && engine.has_offset_head());
+    assert!(engine.offsets().is_empty() && engine.config().offsets);
     engine.compute_votes();
     assert_close(engine.offsets(), &offsets.unwrap().into_data().try_to_vec::<f32>().unwrap());
 

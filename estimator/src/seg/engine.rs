@@ -351,12 +351,6 @@ impl SegEngine {
         if self.votes_pending { &[] } else { &self.offsets }
     }
 
-    /// Whether the file has the centre-offset head (its votes may still have
-    /// to be computed: [`SegEngine::compute_votes`]).
-    pub fn has_offset_head(&self) -> bool {
-        self.config.offsets
-    }
-
     /// The centre vote of the cell under frame pixel `(u, v)` in the last
     /// segmentation: the cell's position plus its predicted offset, in output
     /// cells (x, y). Pixels of one object vote for one point, whichever

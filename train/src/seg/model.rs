@@ -45,7 +45,7 @@ fn up(x: Tensor<4>, like: &Tensor<4>) -> Tensor<4> {
 impl SegNet {
     pub fn new(c: &SegConfig, device: &Device) -> Self {
         let mut layers = c.layers().into_iter().take(9).map(|(_, i, o, k, s)| conv(i, o, k, s, device));
-        let mut next = || layers.next().expect("SegConfig::layers has eight layers");
+        let mut next = || layers.next().expect("SegConfig::layers has at least eight layers");
         Self {
             e1: next(),
             e2: next(),
@@ -62,8 +62,8 @@ impl SegNet {
 
     /// Adds the offset branch `o1`, a copy of `d1` (so the branch starts with
     /// the class features the head could already read), and a fresh offset
-    /// head over it, replacing a head that read `d1`. With `forward_parts(x,
-    /// true)` and the offset loss alone, only these two layers learn.
+    /// head over it, replacing a head that read `d1`. With
+    /// [`SegNet::frozen_trunk`] and the offset loss alone, only these two layers learn.
     pub fn with_offset_branch(mut self, c: &SegConfig, device: &Device) -> Self {
         if self.o1.is_none() {
             let mut o1 = conv(c.dec[1] + c.enc[0], c.dec[2], 3, 1, device);
@@ -110,13 +110,6 @@ impl SegNet {
 
     /// Logits and, with the offset head, centre offsets `[B, 2, H1, W1]`.
     pub fn forward_all(&self, x: Tensor<4>) -> (Tensor<4>, Option<Tensor<4>>) {
-        self.forward_parts(x, false)
-    }
-
-    /// As [`SegNet::forward_all`]; with `detach_trunk` the offset branch reads
-    /// its input detached, so a loss on the offsets alone trains `o1` and
-    /// `offset` and leaves every other tensor as it was.
-    pub fn forward_parts(&self, x: Tensor<4>, detach_trunk: bool) -> (Tensor<4>, Option<Tensor<4>>) {
         let e1 = relu(self.e1.forward(x));
         let e2 = relu(self.e2.forward(e1.clone()));
         let e3 = relu(self.e3.forward(e2.clone()));
@@ -125,12 +118,12 @@ impl SegNet {
         let d2 = relu(self.d2.forward(Tensor::cat(vec![up(d3, &e2), e2], 1)));
         let cat1 = Tensor::cat(vec![up(d2, &e1), e1], 1);
         let d1 = relu(self.d1.forward(cat1.clone()));
-        let features = match &self.o1 {
-            Some(o1) => Some(relu(o1.forward(if detach_trunk { cat1.detach() } else { cat1 }))),
-            None if detach_trunk => Some(d1.clone().detach()),
-            None => Some(d1.clone()),
-        };
-        let offsets = self.offset.as_ref().zip(features).map(|(o, f)| o.forward(f));
+        let offsets = self.offset.as_ref().map(|o| {
+            o.forward(match &self.o1 {
+                Some(o1) => relu(o1.forward(cat1)),
+                None => d1.clone(),
+            })
+        });
         (self.head.forward(d1), offsets)
     }
 }

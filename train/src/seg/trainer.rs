@@ -77,8 +77,9 @@ pub struct SegTrainConfig {
     /// a resumed file without the branch gets one, copied from `d1`.
     pub offset_branch: bool,
     /// Train the offset head (and branch) alone on a resumed segmenter: the
-    /// loss is the offset loss, the branch reads the trunk detached, and every
-    /// other tensor stays bit for bit as it was (its class outputs unchanged).
+    /// loss is the offset loss, every other layer is `no_grad`
+    /// ([`SegNet::frozen_trunk`]) and stays bit for bit as it was (its class
+    /// outputs unchanged).
     pub freeze_trunk: bool,
     /// Largest lift of a small object region's cells in the cross-entropy
     /// ([`small_region_weights`], reference [`SMALL_REGION_CELLS`]); 1 = off.
@@ -424,25 +425,23 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
             &device,
         );
         let target: Vec<u16> = batch.iter().flat_map(|s| s.target.iter().copied()).collect();
-        let (logits, offsets) = net.forward_parts(input, cfg.freeze_trunk);
+        let (logits, offsets) = net.forward_all(input);
         let [_, _, h1, w1] = logits.dims();
         let offset_loss = offsets.map(|pred| {
             let t: Vec<f32> = batch.iter().flat_map(|s| s.offsets.iter().copied()).collect();
             let m: Vec<f32> = batch.iter().flat_map(|s| s.offset_mask.iter().copied()).collect();
             offset_l1(pred, &t, &m).mul_scalar(cfg.offset_weight)
         });
-        let loss = match offset_loss {
-            // Frozen: the class loss would train the trunk, so it is left out.
-            Some(o) if cfg.freeze_trunk => o,
-            offset_loss => {
-                let scale = (cfg.small_region_boost > 1.0)
-                    .then(|| small_region_weights(&target, w1, h1, SMALL_REGION_CELLS, cfg.small_region_boost));
-                let ce = weighted_cross_entropy_scaled(logits, &target, &weights, scale.as_deref());
-                match offset_loss {
-                    Some(o) => ce + o,
-                    None => ce,
-                }
-            }
+        // Frozen, the trunk and class head learn nothing: no class loss to compute.
+        let class_loss = (!cfg.freeze_trunk).then(|| {
+            let scale = (cfg.small_region_boost > 1.0)
+                .then(|| small_region_weights(&target, w1, h1, SMALL_REGION_CELLS, cfg.small_region_boost));
+            weighted_cross_entropy_scaled(logits, &target, &weights, scale.as_deref())
+        });
+        let loss = match (class_loss, offset_loss) {
+            (Some(c), Some(o)) => c + o,
+            (Some(l), None) | (None, Some(l)) => l,
+            (None, None) => bail!("a frozen trunk leaves only the offset head to train, and there is none"),
         };
         let lv = loss.clone().into_data().try_to_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN)
             as f64;
