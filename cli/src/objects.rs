@@ -1,7 +1,8 @@
 //! `fusepose objects`: list an object set (built-in or a folder of meshes) or
 //! export it as fusepose loads it (metres, textures resolved) as OBJ + MTL +
 //! PNG folders with `models_info.json`, which other tools read (the
-//! path-traced split's Blender script, `tools/blender/`).
+//! path-traced split's Blender script, `tools/blender/`); or write a
+//! procedural object set the same way (for pretraining a trunk).
 
 use std::path::{Path, PathBuf};
 
@@ -9,6 +10,7 @@ use anyhow::Context;
 use fusepose_scene::export::export_objects;
 use fusepose_scene::mesh_io::checks::{CheckWarning, MissingTextures, SymmetrySuggestion, suggest_symmetry};
 use fusepose_scene::mesh_io::load_object_dir_checked;
+use fusepose_scene::procedural::procedural_objects;
 use fusepose_scene::symmetry_spec::{Describe, SymmetrySpec, apply_symmetry_specs};
 use fusepose_scene::{ObjectSet, builtin::builtin_objects};
 
@@ -48,6 +50,22 @@ enum Command {
         #[command(flatten)]
         set: SetArgs,
     },
+    /// Write a procedural object set to DIR as `export` does: COUNT varied textured
+    /// objects (a body solid with up to two parts attached off-centre), for pretraining
+    /// a trunk that other object sets warm-start from (`train --warm-start`).
+    Procedural {
+        /// Output folder (created if missing; existing files are overwritten).
+        dir: PathBuf,
+        /// How many objects.
+        #[arg(long, default_value_t = 40)]
+        count: usize,
+        /// The same seed and count always write the same objects.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Put the eight built-in objects first (class ids 1..8), then the procedural ones.
+        #[arg(long)]
+        with_builtin: bool,
+    },
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -56,6 +74,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Command::Export { dir, set: args } => {
             let mut set = load_set(&args.objects, args.scale)?.0;
             apply_symmetry_specs(&mut set, &args.symmetry)?;
+            let info = export_objects(&set, &dir).with_context(|| format!("exporting to {}", dir.display()))?;
+            println!("wrote {} objects and {}", set.len(), info.display());
+            Ok(())
+        }
+        Command::Procedural { dir, count, seed, with_builtin } => {
+            let mut set = if with_builtin { builtin_objects() } else { ObjectSet::default() };
+            set.objects.extend(procedural_objects(count, seed).objects);
             let info = export_objects(&set, &dir).with_context(|| format!("exporting to {}", dir.display()))?;
             println!("wrote {} objects and {}", set.len(), info.display());
             Ok(())

@@ -215,6 +215,12 @@ pub struct Args {
     /// `--stage all`: start from random weights instead of the shipped model's trunk.
     #[arg(long, conflicts_with = "warm_start")]
     pub cold: bool,
+    /// Pose stages from a trained trunk (`--warm-start`, `--resume`): share 0..1 of
+    /// the budget during which only the per-class output layers learn, the trunk
+    /// frozen; then everything learns. 0 = off. With `--stage all` it applies to
+    /// the first pose stage only.
+    #[arg(long, default_value_t = 0.0)]
+    pub heads_first: f64,
     /// `--stage all`: shares of `--minutes` for the pose, segmenter and
     /// fine-tune stages, e.g. `0.4,0.35,0.2`; at most 0.95 in all (the rest
     /// pays for validation and the acceptance report).
@@ -355,6 +361,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         batch: args.batch,
         seed: args.seed,
         lr: args.lr,
+        heads_first: args.heads_first,
         loss_points: 500,
         checkpoint_dir: args.checkpoint_dir,
         checkpoint_every: Duration::from_secs_f64(args.checkpoint_minutes * 60.0),

@@ -1,6 +1,6 @@
 //! # fusepose-scene — the world the estimator is trained on and judged by
 //!
-//! Object models (OBJ/PLY loading, the built-in object set), the CPU RGB-D
+//! Object models (OBJ/PLY loading, the built-in and procedural object sets), the CPU RGB-D
 //! renderer and its sensor-noise model, the tabletop scene sampler, datasets
 //! (BOP read/write, YCB-Video read) and pose metrics (ADD, ADD-S, AUC).
 //!
@@ -26,6 +26,7 @@ pub mod export;
 pub mod mesh_io;
 pub mod metrics;
 pub mod overlay;
+pub mod procedural;
 pub mod render;
 pub mod sampler;
 pub mod shadow_mesh;

@@ -168,6 +168,16 @@ fn every_subcommand_runs_once_with_tiny_sizes() -> anyhow::Result<()> {
     assert_eq!(dice["symmetry"]["kind"].as_str(), Some("discrete"), "{info}");
     assert!(exported.join(dice["mesh"].as_str().unwrap_or("-")).is_file(), "{info}");
 
+    // objects procedural: the built-ins then three made-up objects, as a folder
+    // that `objects list` (and so `train --objects`) loads back with textures.
+    let procedural = dir.join("procedural");
+    run(&env, dir, &fp, &["objects", "procedural", &s(&procedural), "--count", "3", "--seed", "4", "--with-builtin"])?;
+    let listing = run(&env, dir, &fp, &["objects", "list", "--objects", &s(&procedural)])?;
+    let rows: Vec<&str> = listing.lines().filter(|l| l.trim_start().starts_with(char::is_numeric)).collect();
+    assert_eq!(rows.len(), 11, "{listing}");
+    assert!(rows[0].contains("cracker_box") && rows[10].contains("proc_002"), "{listing}");
+    assert!(!listing.contains("warning:"), "procedural textures load without warnings: {listing}");
+
     // eval: the network with the shipped weights by default; root and split folder give the same result.
     let (by_root, by_split) = (dir.join("root.json"), dir.join("split.json"));
     run(

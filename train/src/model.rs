@@ -249,4 +249,33 @@ impl FusionNet {
     pub fn new(c: &NetConfig, device: &Device) -> Self {
         Self { cnn: ColorCnn::new(c, device), pose: PoseNet::new(c, device), refine: Refiner::new(c, device) }
     }
+
+    /// The trunk — colour CNN and every layer of the pose net and refiner
+    /// that does not depend on the class count, the tensors a warm start
+    /// copies — set to learn or not. The per-class output layers
+    /// (`pose.rot|tra|conf`, `refine.rot|tra`) always learn. A frozen trunk
+    /// records no autodiff graph, so a step costs its forward pass and the
+    /// heads' backward pass only.
+    pub fn with_trunk_learning(mut self, learn: bool) -> Self {
+        self.cnn = self.cnn.set_require_grad(learn);
+        let p = &mut self.pose;
+        for layer in [
+            &mut p.g1,
+            &mut p.g2,
+            &mut p.c1,
+            &mut p.c2,
+            &mut p.l1,
+            &mut p.l2,
+            &mut p.h1_local,
+            &mut p.h1_global,
+            &mut p.h2,
+        ] {
+            *layer = layer.clone().set_require_grad(learn);
+        }
+        let r = &mut self.refine;
+        for layer in [&mut r.g1, &mut r.g2, &mut r.c1, &mut r.c2, &mut r.l1, &mut r.l2, &mut r.m1] {
+            *layer = layer.clone().set_require_grad(learn);
+        }
+        self
+    }
 }

@@ -95,6 +95,11 @@ pub struct TrainOptions {
     /// count ([`crate::seeded_workers`]). One keeps a 2-core CPU's second core
     /// for the network; a GPU run wants every core rendering.
     pub data_threads: usize,
+    /// Share (0..1) of the run's budget, from its start, during which only
+    /// the per-class output layers learn ([`FusionNet::with_trunk_learning`]);
+    /// then everything does. 0 = off. Meant for a warm start: new class
+    /// heads first learn to read a trained trunk before it moves.
+    pub heads_first: f64,
 }
 
 /// What a finished run reports.
@@ -150,6 +155,15 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     }
     if opts.batch == 0 {
         bail!("batch must be at least 1");
+    }
+    if !(0.0..=1.0).contains(&opts.heads_first) {
+        bail!("--heads-first is a share of the run, 0..=1; got {}", opts.heads_first);
+    }
+    if opts.heads_first > 0.0 && opts.warm_start.is_none() && opts.resume.is_none() {
+        bail!(
+            "--heads-first freezes a trained trunk, but this run starts from random weights: \
+             give --warm-start FILE (or --resume FILE), or leave --heads-first at 0"
+        );
     }
     let device = opts.device.autodiff()?;
     device.seed(opts.seed);
@@ -253,6 +267,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
     let mut ema_loss = f64::NAN;
     let mut step_time = 0.0f64;
     let ema = |e: f64, v: f64| if e.is_nan() { v } else { 0.98 * e + 0.02 * v };
+    let mut trunk_frozen = opts.heads_first > 0.0;
+    if trunk_frozen {
+        net = net.with_trunk_learning(false);
+        log.line(&format!("# heads first: trunk frozen for {:.0} % of the run", 100.0 * opts.heads_first.min(1.0)));
+    }
     loop {
         let elapsed = t_start.elapsed();
         let done = record.steps - start_steps;
@@ -266,6 +285,11 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
             (None, Some(l)) => done as f64 / (l - start_steps).max(1) as f64,
             (None, None) => unreachable!(),
         };
+        if trunk_frozen && frac >= opts.heads_first {
+            net = net.with_trunk_learning(true);
+            trunk_frozen = false;
+            log.line(&format!("# heads first: trunk learns from step {}", record.steps));
+        }
         // Batch: keep a shuffle pool of a few batches (samples of one frame are correlated).
         while pool.len() < 4 * b {
             stream.check()?;

@@ -88,6 +88,8 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
             a.minutes = Some((pose_min - used).max(0.5));
             println!("   continuing from {} ({used:.1} min done)", ckpt.display());
             (a.resume, a.warm_start) = (Some(ckpt), None);
+            // The heads-first share is of the whole stage; what is left of it, of what is left.
+            a.heads_first = ((args.heads_first * pose_min - used) / (pose_min - used).max(1e-9)).clamp(0.0, 1.0);
         } else {
             a.warm_start = trunk(args)?;
             if let Some(t) = &a.warm_start {
@@ -129,6 +131,7 @@ pub fn run(args: &Args) -> anyhow::Result<()> {
         a.warm_start = None;
         a.seg_masks = 0.5;
         a.lr = args.lr.min(3e-4);
+        a.heads_first = 0.0;
         super::run(a)?;
         std::fs::write(work.tuned(), args.out.display().to_string())?;
     }

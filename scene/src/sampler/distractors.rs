@@ -142,7 +142,12 @@ pub fn solid_mesh(kind: Solid, size: [f32; 3], material: Material) -> Mesh {
         }
         Solid::Torus => torus(sx / 2.0 - sz / 2.0, sz / 2.0, material),
     };
-    // Re-centre on the bounding box.
+    recentre_on_bbox(&mut m);
+    m
+}
+
+/// Moves a mesh so that its bounding box is centred on the origin.
+pub fn recentre_on_bbox(m: &mut Mesh) {
     let (mut lo, mut hi) = ([f32::INFINITY; 3], [f32::NEG_INFINITY; 3]);
     for p in &m.positions {
         for c in 0..3 {
@@ -155,7 +160,6 @@ pub fn solid_mesh(kind: Solid, size: [f32; 3], material: Material) -> Mesh {
             p[c] -= (lo[c] + hi[c]) / 2.0;
         }
     }
-    m
 }
 
 /// Mean linear albedo of an object class: its textures (subsampled),
@@ -227,18 +231,17 @@ fn random_solid(rng: &mut Pcg64Mcg) -> Solid {
     [Solid::Box, Solid::Cylinder, Solid::Sphere, Solid::Torus, Solid::Cone][rng.random_range(0..5)]
 }
 
-/// A distractor mesh 3–14 cm across (`Strong` up to 20 cm).
-fn random_distractor_mesh(rng: &mut Pcg64Mcg, set: &ObjectSet, level: Randomize) -> Mesh {
-    let kind = random_solid(rng);
-    let max: f32 = if level == Randomize::Strong { 0.2 } else { 0.14 };
-    let mut d = || rng.random_range(0.03f32..max);
-    let size = match kind {
+/// A random size for a `kind` solid ([`solid_mesh`]'s `size`), each drawn
+/// extent in `lo..hi` metres; a torus is at least `torus_min` across.
+pub fn random_solid_size(rng: &mut Pcg64Mcg, kind: Solid, lo: f32, hi: f32, torus_min: f32) -> [f32; 3] {
+    let mut d = || rng.random_range(lo..hi);
+    match kind {
         Solid::Sphere => {
             let s = d();
             [s, s, s]
         }
         Solid::Torus => {
-            let s = d().max(0.05);
+            let s = d().max(torus_min);
             [s, s, s * 0.3]
         }
         Solid::Cylinder | Solid::Cone => {
@@ -246,7 +249,14 @@ fn random_distractor_mesh(rng: &mut Pcg64Mcg, set: &ObjectSet, level: Randomize)
             [r, r, d()]
         }
         Solid::Box => [d(), d(), d()],
-    };
+    }
+}
+
+/// A distractor mesh 3–14 cm across (`Strong` up to 20 cm).
+fn random_distractor_mesh(rng: &mut Pcg64Mcg, set: &ObjectSet, level: Randomize) -> Mesh {
+    let kind = random_solid(rng);
+    let max: f32 = if level == Randomize::Strong { 0.2 } else { 0.14 };
+    let size = random_solid_size(rng, kind, 0.03, max, 0.05);
     solid_mesh(kind, size, random_material(rng, set))
 }
 
