@@ -218,9 +218,15 @@ pub struct Args {
     /// Pose stages from a trained trunk (`--warm-start`, `--resume`): share 0..1 of
     /// the budget during which only the per-class output layers learn, the trunk
     /// frozen; then everything learns. 0 = off. With `--stage all` it applies to
-    /// the first pose stage only.
-    #[arg(long, default_value_t = 0.0)]
-    pub heads_first: f64,
+    /// the first pose stage only, and defaults to 0.25 there when that stage
+    /// warm-starts (measured: docs/TRAINING.md, session 29); 0 otherwise.
+    #[arg(long)]
+    pub heads_first: Option<f64>,
+    /// Warm starts: how the per-class output layers begin. `fresh` (random,
+    /// the default) or `class-mean` (the translation and confidence heads
+    /// start as the mean of the trained file's classes; rotation heads fresh).
+    #[arg(long, value_name = "fresh|class-mean", value_parser = fusepose_train::warm_start::WarmHeads::parse, default_value = "fresh")]
+    pub warm_heads: fusepose_train::warm_start::WarmHeads,
     /// `--stage all`: shares of `--minutes` for the pose, segmenter and
     /// fine-tune stages, e.g. `0.4,0.35,0.2`; at most 0.95 in all (the rest
     /// pays for validation and the acceptance report).
@@ -361,7 +367,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         batch: args.batch,
         seed: args.seed,
         lr: args.lr,
-        heads_first: args.heads_first,
+        heads_first: args.heads_first.unwrap_or(0.0),
+        warm_heads: args.warm_heads,
         loss_points: 500,
         checkpoint_dir: args.checkpoint_dir,
         checkpoint_every: Duration::from_secs_f64(args.checkpoint_minutes * 60.0),

@@ -119,7 +119,7 @@ pub struct StatsSnapshot {
     /// `drop`, published without the VERIFIED flag with `flag`.
     pub poses_failed_verification: u64,
     /// Instances left without a pose because the frame's deadline did not
-    /// pay for them (the smallest of their frame; the message is DEGRADED).
+    /// pay for them (they take turns across frames; the message is DEGRADED).
     pub objects_shed: u64,
     /// Messages flagged DEGRADED.
     pub frames_degraded: u64,

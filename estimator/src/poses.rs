@@ -122,6 +122,11 @@ impl PoseSet {
         remove_marked(&mut self.poses, dropped)
     }
 
+    /// Sorts the poses by `key` (unstable: give equal poses distinct keys). No allocation.
+    pub fn sort_unstable_by_key<K: Ord>(&mut self, key: impl FnMut(&ObjectPose) -> K) {
+        self.poses.sort_unstable_by_key(key);
+    }
+
     pub fn as_slice(&self) -> &[ObjectPose] {
         &self.poses
     }

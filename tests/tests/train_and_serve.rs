@@ -99,6 +99,8 @@ fn one_command_trains_a_new_object_set_and_the_daemon_serves_it() -> anyhow::Res
     let stdout = String::from_utf8_lossy(&run.stdout);
     assert!(run.status.success(), "train failed:\n{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
     assert!(stdout.contains("warm start from"), "no warm start:\n{stdout}");
+    // The warm-started pose stage trains the new heads alone first (the one command's default).
+    assert!(stdout.contains("heads first: the new class heads learn alone for 25 %"), "no heads-first:\n{stdout}");
     assert!(stdout.contains("tea_box") && stdout.contains("suggested from geometry"), "no mesh listing:\n{stdout}");
     let listed = |name: &str| stdout.lines().find(|l| l.contains(name)).unwrap_or_default().to_owned();
     assert!(listed("hex_can").contains("discrete (5 + identity)"), "{}", listed("hex_can"));

@@ -100,6 +100,8 @@ pub struct TrainOptions {
     /// then everything does. 0 = off. Meant for a warm start: new class
     /// heads first learn to read a trained trunk before it moves.
     pub heads_first: f64,
+    /// How a warm start's per-class heads begin ([`crate::warm_start::WarmHeads`]).
+    pub warm_heads: crate::warm_start::WarmHeads,
 }
 
 /// What a finished run reports.
@@ -190,7 +192,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         }
         None if opts.warm_start.is_some() => {
             let path = opts.warm_start.as_ref().expect("checked");
-            let (net, cfg, w) = crate::warm_start::warm_start(path, set.len(), &device)?;
+            let (net, cfg, w) = crate::warm_start::warm_start(path, set.len(), opts.warm_heads, &device)?;
             log.line(&w.log_line(path));
             (net, cfg, TrainRecord { seed: opts.seed, ..TrainRecord::default() })
         }

@@ -49,6 +49,7 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
         device: fusepose_train::device::TrainDevice::Cpu,
         data_threads: 2,
         heads_first: 0.0,
+        warm_heads: Default::default(),
     };
     let summary = train(Arc::new(builtin_objects()), &opts).unwrap();
     assert_eq!(summary.record.steps, start + 2);
@@ -112,6 +113,7 @@ fn heads_first_trains_the_class_heads_and_keeps_the_trunk() {
         device: fusepose_train::device::TrainDevice::Cpu,
         data_threads: 1,
         heads_first: 1.0,
+        warm_heads: Default::default(),
     };
     let set = Arc::new(set);
     train(set.clone(), &opts).unwrap();

@@ -2,7 +2,8 @@
 //! from the frames themselves, and the plan for one frame — as many refiner
 //! iterations as the remaining time allows (0..max), and when even the pose
 //! net alone does not fit, fewer points per object; when even that does not
-//! fit every instance, only the largest ones (see [`affordable`]).
+//! fit every instance, only as many as it pays for (see [`affordable`]; which
+//! ones rotates across frames, [`super::shed_order`]).
 //!
 //! Costs are per object on one thread, ns, at the full N points; the pose net
 //! and the refiner scale with the points used, the colour CNN does not.
@@ -141,7 +142,7 @@ pub fn plan(
     FramePlan { refine_iterations: 0, points }
 }
 
-/// How many of a frame's `count` instances (largest first) the remaining time
+/// How many of a frame's `count` instances the remaining time
 /// pays for at the cheapest plan (pose net on a quarter of the points, no
 /// refiner) on `threads` threads: all of them without a deadline or before
 /// costs are known, otherwise as many as fit, but at least one. The rest get

@@ -26,6 +26,7 @@ use ndarray::s;
 
 use super::budget::{self, CostModel, FramePlan, ObjectTimes};
 use super::engine::{Engine, Scratch, quat_matrix, unit_quat};
+use super::shed_order::ShedOrder;
 use super::weights::{NetLoadError, WeightFile};
 use crate::tracking::{FitCheck, Prior, TrackOutcome, TrackingConfig, Tracks};
 use crate::{EstimateError, Estimator, FrameView, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
@@ -105,12 +106,13 @@ fn refine_loop(
 }
 
 /// Runs instance `i` of `ws` through the network (from `prior` when tracking).
-/// Whether instance `i` may still start: the largest (0) always does; any
-/// other only while its colour CNN and pose net end before the deadline. The
-/// plan is made from average costs; this check at each start keeps a frame
-/// whose objects run slower than average from overrunning.
-fn admitted(i: usize, job: &FrameJob<'_>) -> bool {
-    i == 0 || budget::step_fits(job.deadline, job.object_ns)
+/// Whether the instance in place `slot` of the frame's order may still
+/// start: the first always does; any other only while its colour CNN and pose
+/// net end before the deadline. The plan is made from average costs; this
+/// check at each start keeps a frame whose objects run slower than average
+/// from overrunning.
+fn admitted(slot: usize, job: &FrameJob<'_>) -> bool {
+    slot == 0 || budget::step_fits(job.deadline, job.object_ns)
 }
 
 impl FrameJob<'_> {
@@ -127,22 +129,25 @@ impl FrameJob<'_> {
     }
 }
 
-/// Runs instances `first, first + 2, …` below `count` on one thread into `out`,
-/// each admitted (or shed) at the speed the thread's previous object ran at.
+/// Runs the instances in places `first, first + 2, …` below `count` of
+/// `order` on one thread into `out`, each admitted (or shed) at the speed the
+/// thread's previous object ran at.
 #[allow(clippy::too_many_arguments)]
 fn run_share(
     engine: &Engine,
     sc: &mut Scratch,
     ws: &Workspace,
     priors: &[Option<Prior>],
+    order: &[u16],
     first: usize,
     count: usize,
     job: &FrameJob<'_>,
     out: &mut Vec<Option<InstanceResult>>,
 ) {
     let mut local = *job;
-    for i in (first..count).step_by(2) {
-        let r = estimate_admitted(engine, sc, ws, i, priors[i], &local);
+    for slot in (first..count).step_by(2) {
+        let i = usize::from(order[slot]);
+        let r = estimate_admitted(engine, sc, ws, slot, i, priors[i], &local);
         if let Some(r) = &r {
             local = job.at_speed_of(&r.times);
         }
@@ -150,16 +155,18 @@ fn run_share(
     }
 }
 
-/// [`estimate_instance`] when the instance is [`admitted`], else `None` (shed).
+/// [`estimate_instance`] of instance `i`, in place `slot` of the frame's
+/// order, when it is [`admitted`], else `None` (shed).
 fn estimate_admitted(
     engine: &Engine,
     sc: &mut Scratch,
     ws: &Workspace,
+    slot: usize,
     i: usize,
     prior: Option<Prior>,
     job: &FrameJob<'_>,
 ) -> Option<InstanceResult> {
-    admitted(i, job).then(|| estimate_instance(engine, sc, ws, i, prior, job))
+    admitted(slot, job).then(|| estimate_instance(engine, sc, ws, i, prior, job))
 }
 
 fn estimate_instance(
@@ -324,12 +331,15 @@ fn finish_pose(
     }
 }
 
-/// A frame's share of work for the worker: instances `1, 3, 5, …` of `*ws`.
+/// A frame's share of work for the worker: the instances in places
+/// `1, 3, 5, …` of `*order`.
 struct Task {
     ws: *const Workspace,
     /// Tracking priors per instance (same length as the instances).
     priors: *const [Option<Prior>],
-    /// Instances estimated this frame: the first `count` (the largest).
+    /// The order the frame's instances are tried in ([`ShedOrder`]).
+    order: *const [u16],
+    /// Instances estimated this frame: the first `count` of the order.
     count: usize,
     plan: FramePlan,
     deadline: Option<Instant>,
@@ -342,8 +352,8 @@ struct Task {
 }
 
 // SAFETY: the caller blocks until the worker reports the task done (also when
-// unwinding, see `WaitGuard`), so `*ws` and `*priors` outlive every access;
-// both are plain data read concurrently by both threads and written by neither.
+// unwinding, see `WaitGuard`), so `*ws`, `*priors` and `*order` outlive every
+// access; all are plain data read concurrently by both threads and written by neither.
 unsafe impl Send for Task {}
 
 enum Msg {
@@ -428,7 +438,7 @@ impl Worker {
                         Msg::Run(task) => {
                             let ok = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
                                 // SAFETY: see `Task`.
-                                let (ws, priors) = unsafe { (&*task.ws, &*task.priors) };
+                                let (ws, priors, order) = unsafe { (&*task.ws, &*task.priors, &*task.order) };
                                 let job = FrameJob {
                                     plan: task.plan,
                                     deadline: task.deadline,
@@ -441,8 +451,8 @@ impl Worker {
                                 };
                                 let mut out = sh.results.lock().unwrap_or_else(|e| e.into_inner());
                                 out.clear();
-                                let count = task.count.min(ws.instances.len());
-                                run_share(&engine, &mut sc, ws, priors, 1, count, &job, &mut out);
+                                let count = task.count.min(ws.instances.len()).min(order.len());
+                                run_share(&engine, &mut sc, ws, priors, order, 1, count, &job, &mut out);
                             }))
                             .is_ok();
                             sh.done.put(ok);
@@ -504,7 +514,7 @@ pub struct NetCounters {
     /// Objects run on fewer than N points.
     pub reduced_point_objects: u64,
     /// Instances left without a pose because the deadline did not pay for
-    /// them (the smallest of their frame; see [`budget::affordable`]).
+    /// them (see [`budget::affordable`]; which ones: [`ShedOrder`]).
     pub shed_objects: u64,
 }
 
@@ -527,6 +537,9 @@ pub struct NetEstimator {
     tracks: Option<Tracks>,
     fit: Option<Arc<FitCheck>>,
     priors: Vec<Option<Prior>>,
+    /// The order this frame's instances are tried in, and its state across frames.
+    order: Vec<u16>,
+    shed_order: ShedOrder,
     counters: NetCounters,
 }
 
@@ -544,6 +557,7 @@ impl NetEstimator {
         let engine = Arc::new(Engine::new(&file)?);
         let c = &engine.config;
         let (n, s, cap) = (c.num_points, c.crop_size, 8);
+        let shed_order = ShedOrder::new(c.num_classes, cap);
         let scratch = Scratch::new(c, n, s);
         let refine_iterations = options.refine_iterations.unwrap_or(c.refine_iters);
         let fit = options.tracking.map(|_| Arc::new(FitCheck::new(objects)));
@@ -570,6 +584,8 @@ impl NetEstimator {
             tracks,
             fit,
             priors: Vec::with_capacity(cap),
+            order: Vec::with_capacity(cap),
+            shed_order,
             counters: NetCounters::default(),
         })
     }
@@ -599,6 +615,8 @@ impl NetEstimator {
             tracks: self.tracks.as_ref().map(|t| Tracks::new(*t.config(), c.num_classes)),
             fit: self.fit.clone(),
             priors: Vec::with_capacity(cap),
+            order: Vec::with_capacity(cap),
+            shed_order: ShedOrder::new(c.num_classes, cap),
             counters: NetCounters::default(),
         }
     }
@@ -688,6 +706,8 @@ impl NetEstimator {
         }
         self.mine.reserve(cap);
         self.priors.reserve(cap);
+        self.order.reserve(cap);
+        self.shed_order.reserve(cap);
         if let Some(w) = &self.worker {
             let _turn = w.frame.lock().unwrap_or_else(|e| e.into_inner());
             w.shared.msg.put(Msg::Resize(n, s, cap));
@@ -711,9 +731,21 @@ impl NetEstimator {
     }
 
     /// The frame gave up accuracy when its plan did or an instance was shed.
-    fn finish_frame(&mut self, plan_degraded: bool) {
+    /// Its poses go back into the instances' order (each instance's own class
+    /// first, then its alternate), and the shed order learns who was posed.
+    fn finish_frame(&mut self, ws: &Workspace, out: &mut PoseSet, plan_degraded: bool) {
         self.last_degraded = plan_degraded || self.last_shed > 0;
         self.counters.degraded_frames += self.last_degraded as u64;
+        let class_of = |i: usize| usize::from(ws.instances[i].class_id) - 1;
+        let found = ws.instances.len();
+        if self.order.iter().enumerate().any(|(slot, &i)| usize::from(i) != slot) {
+            out.sort_unstable_by_key(|p| {
+                let own = ws.instances.get(usize::from(p.instance_id)).map(|inst| inst.class_id);
+                (p.instance_id, own != Some(p.class_id))
+            });
+        }
+        let poses = out.as_slice();
+        self.shed_order.finish(class_of, found, |i| poses.iter().any(|p| usize::from(p.instance_id) == i));
     }
 
     /// Folds one frame's results into the costs, counters and tracks; writes
@@ -774,6 +806,8 @@ impl Estimator for NetEstimator {
         let found = ws.instances.len();
         let ws: &Workspace = ws;
         self.gather_priors(ws);
+        let class_of = |i: usize| usize::from(ws.instances[i].class_id) - 1;
+        self.shed_order.order(class_of, found, &mut self.order);
         let remaining = deadline.map(|d| d.saturating_duration_since(Instant::now()));
         let count = budget::affordable(&self.costs, remaining, found, if found >= 2 { self.threads() } else { 1 });
         self.last_shed = found - count;
@@ -809,6 +843,7 @@ impl Estimator for NetEstimator {
             w.shared.msg.put(Msg::Run(Task {
                 ws,
                 priors: self.priors.as_slice(),
+                order: self.order.as_slice(),
                 count,
                 plan,
                 deadline,
@@ -820,7 +855,7 @@ impl Estimator for NetEstimator {
                 check_fit: job.fit.is_some(),
             }));
             let guard = WaitGuard { shared: &w.shared, ok: None };
-            run_share(&self.engine, &mut self.scratch, ws, &self.priors, 0, count, &job, &mut mine);
+            run_share(&self.engine, &mut self.scratch, ws, &self.priors, &self.order, 0, count, &job, &mut mine);
             let ok = guard.wait();
             let theirs = w.shared.results.lock().unwrap_or_else(|e| e.into_inner());
             if ok && theirs.len() == count / 2 {
@@ -831,7 +866,7 @@ impl Estimator for NetEstimator {
                 drop(theirs);
                 drop(turn);
                 self.mine = mine;
-                self.finish_frame(plan_degraded);
+                self.finish_frame(ws, out, plan_degraded);
                 return Ok(());
             }
             // The worker panicked: this frame and later ones run on the caller's thread.
@@ -842,15 +877,16 @@ impl Estimator for NetEstimator {
             mine.clear();
         }
         let mut local = job;
-        for i in 0..count {
-            let r = estimate_admitted(&self.engine, &mut self.scratch, ws, i, self.priors[i], &local);
+        for slot in 0..count {
+            let i = usize::from(self.order[slot]);
+            let r = estimate_admitted(&self.engine, &mut self.scratch, ws, slot, i, self.priors[i], &local);
             if let Some(r) = &r {
                 local = job.at_speed_of(&r.times);
             }
             self.absorb(r.as_ref(), out);
         }
         self.mine = mine;
-        self.finish_frame(plan_degraded);
+        self.finish_frame(ws, out, plan_degraded);
         Ok(())
     }
 }

@@ -5,7 +5,8 @@
 //! Layout: [`config`] (hyper-parameters), [`meta`] (metadata keys, object
 //! hashes), [`weights`] (loading with typed errors), [`gemm`] (fused
 //! GEMM + bias + ReLU, im2col convolutions), [`engine`] (the forward pass),
-//! [`estimator`] (the [`crate::Estimator`] implementation).
+//! [`estimator`] (the [`crate::Estimator`] implementation), [`budget`] and
+//! [`shed_order`] (what a late frame gives up, and which instances first).
 
 pub mod budget;
 pub mod config;
@@ -13,6 +14,7 @@ pub mod engine;
 pub mod estimator;
 pub mod gemm;
 pub mod meta;
+pub mod shed_order;
 pub mod weights;
 
 pub use config::NetConfig;

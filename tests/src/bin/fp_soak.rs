@@ -437,7 +437,7 @@ fn run(args: &[String]) -> anyhow::Result<()> {
     println!(
         "soak seconds={seconds} fps={fps} estimator={estimator} objects={objects} frames={frames} labels={labels} \
          sent={sent} received={} processed={} skipped_stale={} missed_sequence={} invalid={} deadline_misses={} \
-         estimator_failures={} e2e_p50_ms={:.3} e2e_p99_ms={:.3} e2e_max_ms={:.3} \
+         estimator_failures={} objects_shed={} poses_failed_verification={} frames_degraded={} e2e_p50_ms={:.3} e2e_p99_ms={:.3} e2e_max_ms={:.3} \
          rss_start_kib={rss_start} rss_end_kib={} rss_peak_kib={rss_peak} rss_growth_pct={growth:.2} \
          settle_s={settle:.0} anon_settled_kib={settled_anon} anon_end_kib={} anon_growth_pct={anon_growth:.2} \
          anon_slope_kib_per_min={anon_slope:.1} shmem_end_kib={} rss_1min_kib={} anon_1min_kib={} \
@@ -451,6 +451,9 @@ fn run(args: &[String]) -> anyhow::Result<()> {
         stats.frames_invalid,
         stats.deadline_misses,
         stats.estimator_failures,
+        stats.objects_shed,
+        stats.poses_failed_verification,
+        stats.frames_degraded,
         e2e.p50_ns as f64 / 1e6,
         e2e.p99_ns as f64 / 1e6,
         e2e.max_ns as f64 / 1e6,
