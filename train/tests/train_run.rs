@@ -6,7 +6,7 @@
 //! into its checkpoints as well).
 
 use std::path::PathBuf;
-use std::sync::Arc;
+use std::sync::{Arc, Mutex};
 use std::time::Duration;
 
 use fusepose_estimator::net::WeightFile;
@@ -15,8 +15,14 @@ use fusepose_scene::builtin::builtin_objects;
 use fusepose_train::data::Source;
 use fusepose_train::trainer::{Stage, TrainOptions, train};
 
+/// burn's random seed is one per process (`Device::seed`): two runs at once
+/// would draw each other's initial weights, so these tests take turns (a
+/// CI run once failed "fresh heads are seeded" that way).
+static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
+
 #[test]
 fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
+    let _turn = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
     let dir = std::env::temp_dir().join(format!("fusepose-train-run-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
@@ -79,6 +85,7 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
 /// bit as the warm-start file had it; with no trained trunk it is refused.
 #[test]
 fn heads_first_trains_the_class_heads_and_keeps_the_trunk() {
+    let _turn = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
     let dir = std::env::temp_dir().join(format!("fusepose-heads-first-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
