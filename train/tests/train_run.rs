@@ -6,7 +6,7 @@
 //! into its checkpoints as well).
 
 use std::path::PathBuf;
-use std::sync::{Arc, Mutex};
+use std::sync::{Arc, Mutex, MutexGuard};
 use std::time::Duration;
 
 use fusepose_estimator::net::WeightFile;
@@ -20,13 +20,19 @@ use fusepose_train::trainer::{Stage, TrainOptions, train};
 /// CI run once failed "fresh heads are seeded" that way).
 static ONE_RUN_AT_A_TIME: Mutex<()> = Mutex::new(());
 
-#[test]
-fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
-    let _turn = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
+/// This test's turn, the shipped weight file, and a new folder `name` with its `out.safetensors`.
+fn start(name: &str) -> (MutexGuard<'static, ()>, PathBuf, PathBuf, PathBuf) {
+    let turn = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
     let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
-    let dir = std::env::temp_dir().join(format!("fusepose-train-run-{}", std::process::id()));
+    let dir = std::env::temp_dir().join(format!("fusepose-{name}-{}", std::process::id()));
     std::fs::create_dir_all(&dir).unwrap();
     let out = dir.join("out.safetensors");
+    (turn, shipped, dir, out)
+}
+
+#[test]
+fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
+    let (_turn, shipped, dir, out) = start("train-run");
     let start = WeightFile::read(&shipped).unwrap().train.unwrap_or_default().steps;
     let opts = TrainOptions {
         warm_start: None,
@@ -85,11 +91,7 @@ fn resumed_training_on_segmenter_masks_keeps_the_embedded_segmenter() {
 /// bit as the warm-start file had it; with no trained trunk it is refused.
 #[test]
 fn heads_first_trains_the_class_heads_and_keeps_the_trunk() {
-    let _turn = ONE_RUN_AT_A_TIME.lock().unwrap_or_else(|e| e.into_inner());
-    let shipped = PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
-    let dir = std::env::temp_dir().join(format!("fusepose-heads-first-{}", std::process::id()));
-    std::fs::create_dir_all(&dir).unwrap();
-    let out = dir.join("out.safetensors");
+    let (_turn, shipped, dir, out) = start("heads-first");
     // Two of the built-ins: a new object set whose heads start fresh.
     let mut set = builtin_objects();
     set.objects.truncate(2);
