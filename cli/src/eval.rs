@@ -242,6 +242,23 @@ pub struct Args {
     /// `votes-only`, as the daemon's `estimator.recut_proposal`.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.proposal)]
     pub recut_proposal: fusepose_estimator::recut::CutProposal,
+    /// `--recut`: most pieces a region is cut into (2 to 6): a region whose
+    /// pose covers a share c of it is cut into 1 ÷ c pieces, rounded, as the
+    /// daemon's `estimator.recut_pieces`.
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.max_pieces,
+          value_parser = clap::builder::RangedI64ValueParser::<usize>::new().range(2..=fusepose_estimator::recut::MAX_CUT_PIECES as i64))]
+    pub recut_pieces: usize,
+    /// `--recut`: which regions' poses qualify besides their coverage:
+    /// `passed` (verified poses), `coverage` (also poses that failed on
+    /// their coverage alone) or `any` (any pose of a region the segmenter
+    /// was sure of), as the daemon's `estimator.recut_poses`.
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.poses)]
+    pub recut_poses: fusepose_estimator::recut::RecutPoses,
+    /// `--recut`: once the pieces have poses, give each pixel to the piece
+    /// whose posed box holds it and estimate the pieces again, as the
+    /// daemon's `estimator.recut_refit`.
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.refit, action = clap::ArgAction::Set)]
+    pub recut_refit: bool,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -591,6 +608,9 @@ impl Runner {
                     max_coverage: args.recut,
                     min_separation: args.recut_separation,
                     proposal: args.recut_proposal,
+                    max_pieces: args.recut_pieces,
+                    poses: args.recut_poses,
+                    refit: args.recut_refit,
                     ..fusepose_estimator::recut::RecutConfig::DEFAULT
                 };
                 if recut_config.is_on() && args.verify != "off" {
@@ -877,9 +897,20 @@ impl Runner {
                         }
                     }
                     let (under_class, _) = under.iter().enumerate().max_by_key(|&(_, n)| *n).unwrap_or((0, &0));
+                    // True instances holding at least a tenth of the region.
+                    let mut inside = std::collections::HashMap::<u16, usize>::new();
+                    if let Some(id) = ws.component_id(p.instance_id as usize) {
+                        for (&c, &t) in ws.component_ids().iter().zip(&frame.instances) {
+                            if c == id && t != 0 {
+                                *inside.entry(t).or_default() += 1;
+                            }
+                        }
+                    }
+                    let total: usize = inside.values().sum();
+                    let copies = inside.values().filter(|&&n| n * 10 >= total.max(1)).count();
                     let sprob = v.region_probability;
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
+                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -1011,7 +1042,7 @@ impl Runner {
             let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, refused, .. } = self.recut_stats;
             let [unverified, close, explained, overlap] = refused;
             println!(
-                "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes), {kept} kept as two; \
+                "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes), {kept} kept (as two or more copies); \
                  refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap"
             );
         }

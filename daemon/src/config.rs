@@ -269,6 +269,19 @@ pub struct EstimatorConfig {
     /// centres, else the region's 3D points), `votes-only` or `points`
     /// (`fusepose_estimator::recut::CutProposal`).
     pub recut_proposal: String,
+    /// `recut`: most pieces a region is cut into (2 to 6): one whose pose
+    /// covers a share c of it is cut into 1 ÷ c pieces, rounded up
+    /// (`fusepose_estimator::recut::pieces_for`).
+    pub recut_pieces: usize,
+    /// `recut`: which regions' poses qualify besides their coverage:
+    /// `passed` (verified poses), `coverage` (also poses that failed on their
+    /// coverage alone) or `any` (any pose of a region the segmenter was sure
+    /// of) (`fusepose_estimator::recut::RecutPoses`).
+    pub recut_poses: String,
+    /// `recut`: once the pieces have poses, give each pixel to the piece whose
+    /// posed bounding box holds it and estimate the pieces again
+    /// (`fusepose_estimator::recut::RecutConfig::refit`).
+    pub recut_refit: bool,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -398,6 +411,9 @@ impl Default for EstimatorConfig {
             class_alternates: fusepose_estimator::alternates::DEFAULT_MIN_PROBABILITY,
             recut: fusepose_estimator::recut::RecutConfig::DEFAULT.max_coverage,
             recut_proposal: fusepose_estimator::recut::RecutConfig::DEFAULT.proposal.to_string(),
+            recut_pieces: fusepose_estimator::recut::RecutConfig::DEFAULT.max_pieces,
+            recut_poses: fusepose_estimator::recut::RecutConfig::DEFAULT.poses.to_string(),
+            recut_refit: fusepose_estimator::recut::RecutConfig::DEFAULT.refit,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             seg_depth_regions: "on".to_owned(),
@@ -639,6 +655,16 @@ impl DaemonConfig {
                 "must be \"votes\", \"votes-only\" or \"points\"",
             ));
         }
+        if !(2..=fusepose_estimator::recut::MAX_CUT_PIECES).contains(&e.recut_pieces) {
+            return Err(invalid("estimator.recut_pieces", e.recut_pieces, "must be in 2..=6"));
+        }
+        if e.recut_poses.parse::<fusepose_estimator::recut::RecutPoses>().is_err() {
+            return Err(invalid(
+                "estimator.recut_poses",
+                &e.recut_poses,
+                "must be \"passed\", \"coverage\" or \"any\"",
+            ));
+        }
         if e.seg_voting.parse::<fusepose_estimator::seg::VotingMode>().is_err() {
             return Err(invalid(
                 "estimator.seg_voting",
@@ -868,6 +894,14 @@ mod tests {
         let c = DaemonConfig::parse("[estimator]\nrecut_proposal = \"points\"\n").unwrap();
         assert_eq!(c.estimator.recut_proposal, "points");
         assert_eq!(DaemonConfig::parse("").unwrap().estimator.recut_proposal, "votes");
+        for bad in ["1", "7"] {
+            let err = DaemonConfig::parse(&format!("[estimator]\nrecut_pieces = {bad}\n")).unwrap_err().to_string();
+            assert!(err.starts_with("estimator.recut_pieces") && err.contains("2..=6"), "{err}");
+        }
+        assert_eq!(DaemonConfig::parse("[estimator]\nrecut_pieces = 4\n").unwrap().estimator.recut_pieces, 4);
+        let err = DaemonConfig::parse("[estimator]\nrecut_poses = \"all\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.recut_poses") && err.contains("\"coverage\""), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\nrecut_poses = \"any\"\n").unwrap().estimator.recut_poses, "any");
         let err = DaemonConfig::parse("[estimator]\nseg_voting = \"no\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_voting") && err.contains("\"off\""), "{err}");
         let c = DaemonConfig::parse("[estimator]\nseg_voting = \"12,6,6\"\n").unwrap();

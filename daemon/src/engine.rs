@@ -209,7 +209,15 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         // A second look needs a pose's verification to decide.
         // Validated with the rest of the configuration.
         let proposal = config.recut_proposal.parse().unwrap_or(RecutConfig::DEFAULT.proposal);
-        let recut = RecutConfig { max_coverage: config.recut, proposal, ..RecutConfig::DEFAULT };
+        let poses = config.recut_poses.parse().unwrap_or(RecutConfig::DEFAULT.poses);
+        let recut = RecutConfig {
+            max_coverage: config.recut,
+            proposal,
+            max_pieces: config.recut_pieces,
+            poses,
+            refit: config.recut_refit,
+            ..RecutConfig::DEFAULT
+        };
         if let Some((objects, _, _)) = spec.verify.as_ref().filter(|_| recut.is_on()) {
             let solids = match &spec.interpenetration {
                 Some((solids, _)) => solids.clone(),
@@ -998,6 +1006,11 @@ mod tests {
         assert!(engine.recut.is_some(), "each camera's engine has its own second look and piece estimator");
         let tuned = EstimatorConfig { recut: 0.7, ..shipped_config() };
         assert_eq!(resolve(&tuned).unwrap().recut.unwrap().2.max_coverage, 0.7);
+        let heaps =
+            EstimatorConfig { recut_pieces: 5, recut_poses: "coverage".into(), recut_refit: true, ..shipped_config() };
+        let config = resolve(&heaps).unwrap().recut.unwrap().2;
+        let want = (5, fusepose_estimator::recut::RecutPoses::Coverage, true);
+        assert_eq!((config.max_pieces, config.poses, config.refit), want);
         let off = EstimatorConfig { recut: 0.0, ..shipped_config() };
         assert!(resolve(&off).unwrap().recut.is_none());
         let unverified = EstimatorConfig { verify: "off".into(), ..shipped_config() };

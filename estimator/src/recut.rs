@@ -11,17 +11,29 @@
 //! (docs/BENCHMARKS.md, session 24).
 //!
 //! So after verification, each region whose pose covers less than
-//! [`RecutConfig::max_coverage`] of it is cut in two (k-means on its 3D
-//! points), each piece is estimated on its own as an instance, and the depth
-//! image decides: the cut stays when both pieces' poses pass verification
-//! and lie apart as two copies must ([`RecutConfig::min_separation`] × the
-//! object's smallest side). The parts of one object, cut, vote for one
-//! centre (the network's per-point translations point at the object's
-//! centre from any part of it); two copies vote for two.
+//! [`RecutConfig::max_coverage`] of it is cut ([`pieces_for`]: about one
+//! piece per share of it the pose covers, 2 to [`RecutConfig::max_pieces`];
+//! k-means on its 3D points), each piece is estimated on its own as an
+//! instance, and the depth image decides: a piece is a copy when its pose
+//! passes verification and lies apart from the copies found before it
+//! ([`RecutConfig::min_separation`] × the object's smallest side, neither
+//! explaining the other, solids apart); the cut stays with two copies or
+//! more, and a piece that is no copy joins the nearest one. The parts of
+//! one object, cut, are posed as one object twice; two copies as two. With
+//! [`RecutConfig::refit`] the pixels then go to the piece whose posed box
+//! holds them and the pieces are estimated again: k-means cuts between
+//! point clusters, which misses the contact of copies whose mass lies off
+//! their centre. In a heap the one pose of a region of several copies lies
+//! between them and fails verification, so [`RecutConfig::poses`] also
+//! takes failed poses' regions (docs/BENCHMARKS.md, session 30).
+//!
+//! The network's own per-point translations do not propose cuts: in a
+//! region of several copies they point at one centre (their k-means centres
+//! 2–16 mm apart where copies lie 20–50 mm apart; session 30).
 //!
 //! In a live stream the second look rarely has the time: two pieces'
-//! estimates and checks cost more than a busy frame leaves. So a cut that
-//! stood is carried to the next frame ([`Recut::hints`] →
+//! estimates and checks cost more than a busy frame leaves. So a cut in two
+//! that stood is carried to the next frame ([`Recut::hints`] →
 //! [`Workspace::set_cut_hints`]): the region is cut before the estimate and
 //! its pieces are posed with the frame's other objects, then judged by the
 //! same terms ([`RecutStats::carried`]); a frame without the time for the
@@ -45,6 +57,8 @@ use crate::{EstimateError, Estimator};
 
 /// Points per region the cut clusters.
 const SAMPLES: usize = 128;
+/// Most pieces one region is cut into ([`RecutConfig::max_pieces`]).
+pub const MAX_CUT_PIECES: usize = 6;
 /// Frames for which a deferred cut that the next frame refused is not
 /// deferred again near the same place (one second at 24 FPS).
 pub const REFUSED_FRAMES: u32 = 24;
@@ -57,10 +71,13 @@ struct Refused {
     frames: u32,
 }
 
+/// Rounds of [`Recut::refit`] and estimate: each pose places the next cut.
+const REFIT_ROUNDS: usize = 2;
 /// Fewest valid-depth pixels of a region worth cutting.
 const MIN_POINTS: usize = 64;
-/// Each piece must hold at least this share of the region's samples: a
-/// sliver is what the mask bled onto, not a copy.
+/// Each piece of a cut in two must hold at least this share of the region's
+/// samples (a cut in k pieces: this × 2 ÷ k): a sliver is what the mask bled
+/// onto, not a copy.
 const MIN_PIECE_SHARE: f32 = 0.2;
 /// Centre votes of two copies lie at least this far apart (segmenter output
 /// cells; the votes of one object scatter by a cell or two, and copies that
@@ -139,6 +156,61 @@ pub struct RecutConfig {
     pub max_regions: usize,
     /// Where the cut comes from.
     pub proposal: CutProposal,
+    /// Most pieces a region is cut into (2 to [`MAX_CUT_PIECES`]): one whose
+    /// pose covers a share c of it holds up to 1 ÷ c copies, so it is cut
+    /// into that many, rounded up, at least 2 and at most this ([`pieces_for`]).
+    pub max_pieces: usize,
+    /// Which regions' poses qualify for a second look besides their
+    /// coverage.
+    pub poses: RecutPoses,
+    /// Once the pieces have poses, give each pixel of the region to the
+    /// piece whose posed bounding box holds its point (the nearest box
+    /// where none or several do) and estimate the pieces again
+    /// ([`Recut::refit`]): a cut between point clusters misses the contact
+    /// between copies whose mass lies off their centre (an L, a mug).
+    pub refit: bool,
+}
+
+/// Which poses' regions the second look takes ([`RecutConfig::poses`]).
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub enum RecutPoses {
+    /// Poses that passed verification: a region whose pose failed is more
+    /// often another object taken for this class, and its pieces' poses fit
+    /// a small model anywhere.
+    Passed,
+    /// Also poses that failed on their coverage alone
+    /// ([`Verifier::passes_but_for_coverage`]): the pose of one copy in a
+    /// region of three or more covers too little of it to pass.
+    Coverage,
+    /// Any pose of a region the segmenter was sure of (its certainty floor,
+    /// where judged), except a region's alternate class: in a heap the one
+    /// pose of a region of several copies lies between them and fails, and
+    /// the region would otherwise lose every pose.
+    Any,
+}
+
+impl std::fmt::Display for RecutPoses {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(match self {
+            Self::Passed => "passed",
+            Self::Coverage => "coverage",
+            Self::Any => "any",
+        })
+    }
+}
+
+/// `passed`, `coverage` or `any`.
+impl std::str::FromStr for RecutPoses {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        match s {
+            "passed" => Ok(Self::Passed),
+            "coverage" => Ok(Self::Coverage),
+            "any" => Ok(Self::Any),
+            _ => Err(format!("recut poses {s:?}: expected passed, coverage or any")),
+        }
+    }
 }
 
 impl RecutConfig {
@@ -150,11 +222,29 @@ impl RecutConfig {
         max_overlap: 0.15,
         max_regions: 2,
         proposal: CutProposal::Votes,
+        max_pieces: MAX_CUT_PIECES,
+        poses: RecutPoses::Any,
+        refit: true,
     };
 
     pub fn is_on(&self) -> bool {
         self.max_coverage > 0.0 && self.max_regions > 0
     }
+
+    /// [`RecutConfig::max_pieces`] within 2 ..= [`MAX_CUT_PIECES`].
+    fn pieces(&self) -> usize {
+        self.max_pieces.clamp(2, MAX_CUT_PIECES)
+    }
+}
+
+/// Pieces for a region whose pose covers `coverage` of it: the pose explains
+/// at least one copy, so up to 1 ÷ `coverage` copies, rounded up, within
+/// 2 ..= `max`. Rounded up because a pose between copies covers more than
+/// one, and a piece too many costs little: pieces of one copy fail the
+/// two-copy terms and join it ([`Recut::copies`]).
+pub fn pieces_for(coverage: f32, max: usize) -> usize {
+    let copies = 1.0 / coverage.max(1e-3);
+    ((copies - 1e-3).ceil() as usize).clamp(2, max.max(2))
 }
 
 /// What one frame's second look did.
@@ -162,7 +252,7 @@ impl RecutConfig {
 pub struct RecutStats {
     /// Regions cut and estimated again.
     pub tried: usize,
-    /// Of them, regions whose cut stayed (each now two instances).
+    /// Of them, regions whose cut stayed (each now two instances or more).
     pub kept: usize,
     /// Cuts carried from the last frame ([`Recut::hints`]) that held again.
     pub carried: usize,
@@ -206,6 +296,9 @@ struct Candidate {
     /// Index of the region's pose in the frame's poses.
     pose: usize,
     coverage: f32,
+    /// Pieces it was cut into, and the piece plane's id before its first.
+    pieces: u8,
+    base: u16,
 }
 
 /// Cuts, estimates and judges regions again; see the module doc.
@@ -215,8 +308,10 @@ pub struct Recut {
     solids: std::sync::Arc<crate::interpenetration::Solids>,
     /// Per class (id − 1): the smallest bounding-box side, metres.
     sides: Vec<f32>,
-    /// The pieces as an instance plane: piece ids 2j + 1 and 2j + 2 for
-    /// candidate j, 0 elsewhere.
+    /// Per class (id − 1): the bounding box (min, max corners), model frame, metres.
+    boxes: Vec<[[f32; 3]; 2]>,
+    /// The pieces as an instance plane: piece ids base + 1 ..= base + k for
+    /// a candidate cut into k pieces ([`Candidate`]), 0 elsewhere.
     ids: Vec<u16>,
     classes: Vec<u16>,
     /// Boxes written into `ids` this frame (cleared on the next).
@@ -234,8 +329,8 @@ pub struct Recut {
     votes: Option<Box<dyn CentreVotes + Send>>,
     cluster: Vec<u8>,
     order: Vec<(f32, u8)>,
-    /// Per candidate: its two centres (k-means), camera frame.
-    centres: Vec<[[f32; 3]; 2]>,
+    /// Per candidate: its pieces' centres (k-means), camera frame.
+    centres: Vec<[[f32; 3]; MAX_CUT_PIECES]>,
     marks: Vec<bool>,
     /// [`Recut::limit_next_frame`]'s cap, for the next frame only.
     frame_limit: Option<usize>,
@@ -261,18 +356,24 @@ impl Recut {
         config: RecutConfig,
     ) -> Result<Self, WorkspaceConfigError> {
         let regions = config.max_regions.max(1);
-        let mut ws = Workspace::new(WorkspaceConfig { max_instances: 2 * regions, ..ws_config })?;
+        let pieces = config.pieces() * regions;
+        let mut ws = Workspace::new(WorkspaceConfig { max_instances: pieces, ..ws_config })?;
         ws.support_floors(&crate::support::class_floors(objects, ws_config.support_floor_m));
         Ok(Self {
             config,
             solids,
             sides: objects.objects.iter().map(|o| (o.bbox_max - o.bbox_min).min() as f32).collect(),
+            boxes: objects
+                .objects
+                .iter()
+                .map(|o| [o.bbox_min.coords.map(|x| x as f32).into(), o.bbox_max.coords.map(|x| x as f32).into()])
+                .collect(),
             ids: Vec::new(),
-            classes: vec![0; 2 * regions + 1],
+            classes: vec![0; pieces + 1],
             written: Vec::with_capacity(regions),
             ws,
-            poses: PoseSet::with_capacity(4 * regions),
-            verdicts: Vec::with_capacity(4 * regions),
+            poses: PoseSet::with_capacity(2 * pieces),
+            verdicts: Vec::with_capacity(2 * pieces),
             candidates: Vec::with_capacity(ws_config.max_instances.max(regions)),
             samples: Vec::with_capacity(SAMPLES),
             sample_pixels: Vec::with_capacity(SAMPLES),
@@ -364,7 +465,7 @@ impl Recut {
         if self.ids.len() != frame.width() * frame.height() {
             self.warm_up(frame, estimator, seed)?;
         }
-        self.choose(poses.as_slice(), verdicts);
+        self.choose(poses.as_slice(), verdicts, verifier, &ws.instances);
         if self.candidates.is_empty() {
             return Ok(stats);
         }
@@ -391,10 +492,15 @@ impl Recut {
             stats.deferred = self.defer_cuts(poses.as_slice());
             return Ok(stats);
         }
-        stats.kept = self.estimate_pieces(frame, estimator, seed, |this, view, ids| {
-            this.verify(view, verifier, segmenter);
-            this.apply(frame, view, verifier, ids, ws, poses, verdicts)
-        })?;
+        self.estimate_pieces(frame, estimator, seed, |this, view, _| this.verify(view, verifier, segmenter))?;
+        for _ in 0..if self.config.refit { REFIT_ROUNDS } else { 0 } {
+            if self.refit(frame) == 0 {
+                break;
+            }
+            self.estimate_pieces(frame, estimator, seed, |this, view, _| this.verify(view, verifier, segmenter))?;
+        }
+        stats.kept =
+            self.with_pieces(frame, |this, view, ids| this.apply(frame, view, verifier, ids, ws, poses, verdicts));
         stats.refused = self.refusals;
         Ok(stats)
     }
@@ -410,16 +516,83 @@ impl Recut {
         seed: u64,
         then: impl FnOnce(&mut Self, &FrameView<'_>, &[u16]) -> R,
     ) -> Result<R, EstimateError> {
+        self.with_pieces(frame, |this, view, ids| {
+            this.ws
+                .prepare(view, seed)
+                .map_err(EstimateError::Frame)
+                .and_then(|_| estimator.estimate(view, &mut this.ws, &mut this.poses))
+                .map(|()| then(this, view, ids))
+        })
+    }
+
+    /// Runs `f` with the piece plane's view and ids (taken out of `self`
+    /// while the view borrows them; no allocation).
+    fn with_pieces<R>(&mut self, frame: &FrameView<'_>, f: impl FnOnce(&mut Self, &FrameView<'_>, &[u16]) -> R) -> R {
         let (ids, classes) = (std::mem::take(&mut self.ids), std::mem::take(&mut self.classes));
         let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..*frame };
-        let estimated = self
-            .ws
-            .prepare(&view, seed)
-            .map_err(EstimateError::Frame)
-            .and_then(|_| estimator.estimate(&view, &mut self.ws, &mut self.poses))
-            .map(|()| then(self, &view, &ids));
+        let out = f(self, &view, &ids);
         (self.ids, self.classes) = (ids, classes);
-        estimated
+        out
+    }
+
+    /// Gives each pixel with depth of each cut region to the piece whose
+    /// posed bounding box holds its point, or lies nearest to it (inside
+    /// several: the one whose box centre is nearest, in box half-sizes).
+    /// Pieces without a pose take no pixels; a region with fewer than two
+    /// posed pieces is left as cut. Returns how many pixels changed piece.
+    fn refit(&mut self, frame: &FrameView<'_>) -> usize {
+        let w = frame.width();
+        let mut changed = 0;
+        for j in 0..self.candidates.len() {
+            let c = self.candidates[j];
+            // Per piece: rotation (rows = model axes in the camera frame), translation, box.
+            let mut placed = [None; MAX_CUT_PIECES];
+            for (k, slot) in placed.iter_mut().enumerate().take(c.pieces as usize) {
+                *slot = self.piece_pose(j, k).and_then(|a| {
+                    let p = self.poses.as_slice()[a];
+                    let b = *self.boxes.get((p.class_id as usize).checked_sub(1)?)?;
+                    let r = p.rotation.to_rotation_matrix().matrix().transpose().map(|x| x as f32);
+                    Some((r, p.translation.map(|x| x as f32), b))
+                });
+            }
+            if placed.iter().flatten().count() < 2 {
+                continue;
+            }
+            let [u0, v0, u1, v1] = self.written[j].map(|x| x as usize);
+            let first = c.base + 1;
+            let last = c.base + c.pieces as u16;
+            for v in v0..=v1 {
+                for u in u0..=u1 {
+                    let p = v * w + u;
+                    let Some(&id) = self.ids.get(p).filter(|&&id| (first..=last).contains(&id)) else { continue };
+                    let Some(z) = frame.depth.metres(p) else { continue };
+                    let x = nalgebra::Vector3::from(crate::sampling::back_project(frame, u, v, z));
+                    let score = |(r, t, [lo, hi]): &(nalgebra::Matrix3<f32>, nalgebra::Vector3<f32>, [[f32; 3]; 2])| {
+                        let q = r * (x - t);
+                        let (mut outside, mut centre) = (0.0f32, 0.0f32);
+                        for a in 0..3 {
+                            outside += (lo[a] - q[a]).max(q[a] - hi[a]).max(0.0).powi(2);
+                            let half = ((hi[a] - lo[a]) / 2.0).max(1e-4);
+                            centre += ((q[a] - (lo[a] + hi[a]) / 2.0) / half).powi(2);
+                        }
+                        (outside, centre)
+                    };
+                    let best = placed
+                        .iter()
+                        .enumerate()
+                        .filter_map(|(k, slot)| slot.as_ref().map(|s| (k, score(s))))
+                        .min_by(|a, b| a.1.0.total_cmp(&b.1.0).then(a.1.1.total_cmp(&b.1.1)));
+                    if let Some((k, _)) = best {
+                        let new = first + k as u16;
+                        if new != id {
+                            self.ids[p] = new;
+                            changed += 1;
+                        }
+                    }
+                }
+            }
+        }
+        changed
     }
 
     /// Once per frame size: sizes the piece plane, and estimates a square
@@ -508,7 +681,8 @@ impl Recut {
     fn defer_cuts(&mut self, poses: &[ObjectPose]) -> usize {
         let mut deferred = 0;
         for (j, c) in self.candidates.iter().enumerate() {
-            let (centres, class_id) = (self.centres[j], poses[c.pose].class_id);
+            // A deferred frame cuts in two only (see `cut`).
+            let (centres, class_id) = ([self.centres[j][0], self.centres[j][1]], poses[c.pose].class_id);
             let mid = [0, 1, 2].map(|k| (centres[0][k] + centres[1][k]) / 2.0);
             // The same place: within the object's smallest side.
             let reach = self.sides.get(class_id as usize - 1).copied().unwrap_or(0.0);
@@ -525,15 +699,27 @@ impl Recut {
     }
 
     /// The regions to look at, lowest coverage first.
-    fn choose(&mut self, poses: &[ObjectPose], verdicts: &[Verification]) {
+    fn choose(
+        &mut self,
+        poses: &[ObjectPose],
+        verdicts: &[Verification],
+        verifier: &Verifier,
+        instances: &[crate::Instance],
+    ) {
         self.candidates.clear();
         for (k, v) in verdicts.iter().enumerate() {
-            let coverage = v.mask_coverage;
-            // Only a pose the depth supports is worth a second look: a region
-            // whose pose failed is more often another object taken for this
-            // class, and its pieces' poses fit a small model anywhere.
-            if v.passed && coverage < self.config.max_coverage && poses[k].class_id as usize <= self.sides.len() {
-                self.candidates.push(Candidate { pose: k, coverage });
+            let (coverage, pose) = (v.mask_coverage, &poses[k]);
+            let min_probability = verifier.config().min_region_probability;
+            let certain = v.region_probability.is_nan() || v.region_probability >= min_probability;
+            let supported = v.passed
+                || (!crate::alternates::is_alternate(instances, pose)
+                    && match self.config.poses {
+                        RecutPoses::Passed => false,
+                        RecutPoses::Coverage => verifier.passes_but_for_coverage(pose.class_id, v),
+                        RecutPoses::Any => certain,
+                    });
+            if supported && coverage < self.config.max_coverage && pose.class_id as usize <= self.sides.len() {
+                self.candidates.push(Candidate { pose: k, coverage, pieces: 0, base: 0 });
             }
         }
         self.candidates.sort_unstable_by(|a, b| a.coverage.total_cmp(&b.coverage));
@@ -541,13 +727,17 @@ impl Recut {
     }
 
     /// Writes the candidates' pieces into the instance plane, from up to
-    /// [`SAMPLES`] of the region's valid-depth points: by their centre votes
-    /// where [`RecutConfig::proposal`] asks for them and they fall into two
-    /// groups [`MIN_VOTE_GAP_CELLS`] apart (every pixel to the group nearest
-    /// its cell's vote), else by k-means in 3D (every pixel to its nearest
-    /// centre, by image distance to the projected centres where it has no
-    /// depth). Candidates whose pieces are too uneven are dropped. Returns
-    /// how many were cut along votes.
+    /// [`SAMPLES`] of the region's valid-depth points. A region is cut into
+    /// [`pieces_for`] its coverage pieces or, failing that, fewer, down to
+    /// two: by their centre votes where [`RecutConfig::proposal`] asks for
+    /// them and they fall into groups at least [`MIN_VOTE_GAP_CELLS`] apart
+    /// (every pixel to the group nearest its cell's vote), else by k-means
+    /// in 3D (every pixel to its nearest centre, by image distance to the
+    /// projected centres where it has no depth). Pieces must be even enough
+    /// ([`MIN_PIECE_SHARE`]); a candidate no count cuts evenly is dropped.
+    /// A frame whose pieces are deferred cuts in two only: the cut carried
+    /// to the next frame ([`CutHint`]) has two centres. Returns how many
+    /// were cut along votes.
     fn cut(
         &mut self,
         frame: &FrameView<'_>,
@@ -556,6 +746,7 @@ impl Recut {
         votes: Option<&dyn CentreVotes>,
     ) -> usize {
         let voter = votes.filter(|_| self.config.proposal != CutProposal::Points);
+        let max_pieces = if self.defer.is_some() { 2 } else { self.config.pieces() };
         let (w, h) = (frame.width(), frame.height());
         for b in self.written.drain(..) {
             let [u0, v0, u1, v1] = b.map(|x| x as usize);
@@ -566,7 +757,7 @@ impl Recut {
         self.classes.fill(0);
         self.centres.clear();
         let all = ws.component_ids();
-        let (mut kept, mut by_votes) = (0, 0);
+        let (mut kept, mut by_votes, mut base) = (0, 0, 0u16);
         for c in 0..self.candidates.len() {
             let pose = poses[self.candidates[c].pose];
             let Some(id) = ws.component_id(pose.instance_id as usize) else { continue };
@@ -596,61 +787,88 @@ impl Recut {
                 self.sample_pixels.push([u as u16, v as u16]);
             }
             let n = self.samples.len();
-            let min = (MIN_PIECE_SHARE * n as f32).ceil() as usize;
-            let even = |cluster: &[u8]| {
-                let ones = cluster.iter().filter(|&&x| x == 1).count();
-                ones >= min && n - ones >= min
+            let even = |cluster: &[u8], k: usize| {
+                let min = (MIN_PIECE_SHARE * 2.0 / k as f32 * n as f32).ceil() as usize;
+                (0..k).all(|m| cluster.iter().filter(|&&x| x as usize == m).count() >= min)
             };
-            let vote_cut = voter.and_then(|seg| {
+            let most = pieces_for(self.candidates[c].coverage, max_pieces);
+            // The votes of every sample, when there are votes for all.
+            let voted = voter.filter(|seg| {
                 self.sample_votes.clear();
                 for &[u, v] in &self.sample_pixels {
-                    let [x, y] = seg.vote_at(u as usize, v as usize)?;
-                    self.sample_votes.push([x, y, 0.0]);
+                    match seg.vote_at(u as usize, v as usize) {
+                        Some([x, y]) => self.sample_votes.push([x, y, 0.0]),
+                        None => return false,
+                    }
                 }
-                let c = kmeans(&self.sample_votes, 2, &mut self.cluster[..n], &mut self.order);
-                let gap = ((c[0][0] - c[1][0]).powi(2) + (c[0][1] - c[1][1]).powi(2)).sqrt();
-                (gap >= MIN_VOTE_GAP_CELLS && even(&self.cluster[..n]))
-                    .then_some((seg, [[c[0][0], c[0][1]], [c[1][0], c[1][1]]]))
+                true
             });
-            let base = 2 * kept as u16;
+            let mut vote_cut = None;
+            if let Some(seg) = voted {
+                for k in (2..=most).rev() {
+                    let c = kmeans(&self.sample_votes, k, &mut self.cluster[..n], &mut self.order);
+                    let gap = (0..k)
+                        .flat_map(|a| (a + 1..k).map(move |b| (a, b)))
+                        .map(|(a, b)| ((c[a][0] - c[b][0]).powi(2) + (c[a][1] - c[b][1]).powi(2)).sqrt())
+                        .fold(f32::INFINITY, f32::min);
+                    if gap >= MIN_VOTE_GAP_CELLS && even(&self.cluster[..n], k) {
+                        let mut cells = [[0.0f32; 2]; MAX_CUT_PIECES];
+                        for (cell, centre) in cells.iter_mut().zip(&c).take(k) {
+                            *cell = [centre[0], centre[1]];
+                        }
+                        vote_cut = Some((seg, cells, k));
+                        break;
+                    }
+                }
+            }
+            let ids = &mut self.ids;
             let mut fill = |piece_of: &dyn Fn(usize, usize, usize) -> usize| {
                 for v in v0..=v1 {
                     for u in u0..=u1 {
                         let p = v * w + u;
                         if in_region(p) {
-                            self.ids[p] = base + 1 + piece_of(u, v, p) as u16;
+                            ids[p] = base + 1 + piece_of(u, v, p) as u16;
                         }
                     }
                 }
             };
-            let centres = if let Some((seg, votes)) = vote_cut {
-                fill(&|u, v, _| seg.vote_at(u, v).map_or(0, |vote| nearest_2d(&votes, vote)));
+            let mut centres = [[0.0f32; 3]; MAX_CUT_PIECES];
+            let pieces = if let Some((seg, cells, k)) = vote_cut {
+                fill(&|u, v, _| seg.vote_at(u, v).map_or(0, |vote| nearest_2d(&cells[..k], vote)));
                 by_votes += 1;
                 // The pieces' 3D centres (for the cut carried to the next frame).
-                let mut sums = [[0.0f32; 4]; 2];
-                for (p, &k) in self.samples.iter().zip(&self.cluster[..n]) {
-                    let s = &mut sums[k.min(1) as usize];
+                let mut sums = [[0.0f32; 4]; MAX_CUT_PIECES];
+                for (p, &m) in self.samples.iter().zip(&self.cluster[..n]) {
+                    let s = &mut sums[(m as usize).min(k - 1)];
                     *s = [s[0] + p[0], s[1] + p[1], s[2] + p[2], s[3] + 1.0];
                 }
-                sums.map(|s| [s[0] / s[3], s[1] / s[3], s[2] / s[3]])
+                for (centre, s) in centres.iter_mut().zip(&sums).take(k) {
+                    *centre = [s[0], s[1], s[2]].map(|x| x / s[3].max(1.0));
+                }
+                k
             } else {
                 if voter.is_some() && self.config.proposal == CutProposal::VotesOnly {
                     continue;
                 }
-                let centres = kmeans(&self.samples, 2, &mut self.cluster[..n], &mut self.order);
-                if !even(&self.cluster[..n]) {
+                let Some(k) = (2..=most).rev().find(|&k| {
+                    let c = kmeans(&self.samples, k, &mut self.cluster[..n], &mut self.order);
+                    centres[..k].copy_from_slice(&c[..k]);
+                    even(&self.cluster[..n], k)
+                }) else {
                     continue;
+                };
+                let mut pixels = [[0.0f32; 2]; MAX_CUT_PIECES];
+                for (pixel, centre) in pixels.iter_mut().zip(&centres).take(k) {
+                    *pixel = project(frame, Some(centre));
                 }
-                let centres = [centres[0], centres[1]];
-                let pixels = [project(frame, Some(&centres[0])), project(frame, Some(&centres[1]))];
-                fill(&|_, _, p| nearest_piece(frame, &centres, &pixels, p));
-                centres
+                fill(&|_, _, p| nearest_piece(frame, &centres[..k], &pixels[..k], p));
+                k
             };
-            self.classes[base as usize + 1] = pose.class_id;
-            self.classes[base as usize + 2] = pose.class_id;
+            self.classes[base as usize + 1..=base as usize + pieces].fill(pose.class_id);
             self.written.push(bbox);
-            self.candidates[kept] = self.candidates[c];
+            self.candidates[kept] = Candidate { pieces: pieces as u8, base, ..self.candidates[c] };
             self.centres.push(centres);
+            base += pieces as u16;
             kept += 1;
         }
         self.candidates.truncate(kept);
@@ -682,28 +900,65 @@ impl Recut {
 
     /// The pose (index in `self.poses`) of candidate `j`'s piece `k`.
     fn piece_pose(&self, j: usize, k: usize) -> Option<usize> {
-        let want = (2 * j + 1 + k) as u32;
+        let want = (self.candidates[j].base as usize + 1 + k) as u32;
         self.poses.as_slice().iter().position(|p| self.ws.component_id(p.instance_id as usize) == Some(want))
     }
 
-    /// Whether candidate `j`'s pieces are two copies ([`Terms::two_copies`]).
-    fn pieces_are_two_copies(
-        &mut self,
+    /// The pieces of candidate `j` that are copies of the object, each with
+    /// its pose (index in `self.poses`): best fit first, a piece is taken
+    /// when its pose passed verification and it is two copies
+    /// ([`Terms::two_copies`]) with each piece taken before it. Returns how
+    /// many (in piece order), or why fewer than two: the first refusal met,
+    /// else [`Refusal::Unverified`].
+    fn copies(
+        &self,
         j: usize,
         view: &FrameView<'_>,
         verifier: &mut Verifier,
-    ) -> Result<(), Refusal> {
-        let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else {
-            return Err(Refusal::Unverified);
-        };
-        let (pa, pb) = (self.poses.as_slice()[a], self.poses.as_slice()[b]);
-        let ma = self.ws.mask_ref((2 * j + 1) as u32, pa.bbox);
-        let mb = self.ws.mask_ref((2 * j + 2) as u32, pb.bbox);
+        taken: &mut [(usize, usize); MAX_CUT_PIECES],
+    ) -> Result<usize, Refusal> {
+        let c = self.candidates[j];
+        let mut passed = [(0.0f32, 0usize, 0usize); MAX_CUT_PIECES];
+        let mut n = 0;
+        for k in 0..c.pieces as usize {
+            if let Some(a) = self.piece_pose(j, k).filter(|&a| self.verdicts[a].passed) {
+                passed[n] = (self.verdicts[a].fit, k, a);
+                n += 1;
+            }
+        }
+        passed[..n].sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
         let terms = Terms { config: &self.config, sides: &self.sides, solids: &self.solids };
-        terms.two_copies(view, verifier, (&pa, &self.verdicts[a], ma), (&pb, &self.verdicts[b], mb))
+        let mask = |k: usize, a: usize| {
+            (
+                &self.poses.as_slice()[a],
+                &self.verdicts[a],
+                self.ws.mask_ref(c.base as u32 + 1 + k as u32, self.poses.as_slice()[a].bbox),
+            )
+        };
+        let (mut count, mut first) = (0, None);
+        for &(_, k, a) in &passed[..n] {
+            let refusal = taken[..count]
+                .iter()
+                .find_map(|&(tk, ta)| terms.two_copies(view, verifier, mask(k, a), mask(tk, ta)).err());
+            match refusal {
+                None => {
+                    taken[count] = (k, a);
+                    count += 1;
+                }
+                Some(why) => {
+                    first.get_or_insert(why);
+                }
+            }
+        }
+        // In piece order: the first piece's copy keeps the region's instance.
+        taken[..count].sort_unstable_by_key(|t| t.0);
+        if count >= 2 { Ok(count) } else { Err(first.unwrap_or(Refusal::Unverified)) }
     }
 
-    /// Keeps the cuts the depth image supports; returns how many.
+    /// Keeps the cuts the depth image supports; returns how many. The
+    /// region becomes one instance per copy taken ([`Recut::copies`]); a
+    /// piece not taken joins the copy whose piece centre lies nearest (it is
+    /// more of that copy, or a part no pose explains).
     #[allow(clippy::too_many_arguments)]
     fn apply(
         &mut self,
@@ -719,35 +974,65 @@ impl Recut {
         self.marks.resize(poses.len(), false);
         let mut kept = 0;
         for j in 0..self.candidates.len() {
-            let whole = self.candidates[j].pose;
-            if let Err(why) = self.pieces_are_two_copies(j, view, verifier) {
-                self.refusals[why as usize] += 1;
+            let c = self.candidates[j];
+            let whole = c.pose;
+            let mut taken = [(0usize, 0usize); MAX_CUT_PIECES];
+            let count = match self.copies(j, view, verifier, &mut taken) {
+                Ok(count) => count,
+                Err(why) => {
+                    self.refusals[why as usize] += 1;
+                    continue;
+                }
+            };
+            // Room for the copies' poses (the region's goes after the loop).
+            if poses.len() + count > poses.capacity() || ws.instances.len() + count - 1 > ws.config.max_instances {
                 continue;
             }
-            let (Some(a), Some(b)) = (self.piece_pose(j, 0), self.piece_pose(j, 1)) else { continue };
-            let (pa, pb) = (self.poses.as_slice()[a], self.poses.as_slice()[b]);
-            let (va, vb) = (self.verdicts[a], self.verdicts[b]);
-            // Room for both pieces' poses (the region's goes after the loop).
-            if poses.len() + 2 > poses.capacity() {
-                continue;
+            // Each piece's copy: its own if taken, else the nearest taken.
+            let centres = self.centres[j];
+            let mut copy_of = [0usize; MAX_CUT_PIECES];
+            for (k, copy) in copy_of.iter_mut().enumerate().take(c.pieces as usize) {
+                let d = |t: usize| {
+                    let (a, b) = (centres[k], centres[taken[t].0]);
+                    (0..3).map(|x| (a[x] - b[x]).powi(2)).sum::<f32>()
+                };
+                *copy = (0..count).min_by(|&x, &y| d(x).total_cmp(&d(y))).unwrap_or(0);
             }
             let i = poses.as_slice()[whole].instance_id as usize;
-            let base = 2 * j as u16 + 1;
-            let Some(new) = ws.cut_instance(frame, i, |p| ids[p].saturating_sub(base) as usize) else { continue };
-            let placed = |pose: ObjectPose, at: usize| {
-                let inst = ws.instances[at];
-                ObjectPose { instance_id: at as u16, bbox: inst.bbox, mask_pixels: inst.pixels, ..pose }
-            };
-            // Piece 0 keeps the region's instance index, piece 1 is the new one.
-            poses.push(placed(pb, new));
-            verdicts.push(vb);
-            self.marks.push(false);
+            let piece = |p: usize| ids.get(p).map_or(0, |&id| id.saturating_sub(c.base + 1) as usize);
+            // Copy 0 keeps the region's instance index; each other is cut off it.
+            let mut at = [i; MAX_CUT_PIECES];
+            let mut made = 1;
+            while made < count {
+                let Some(new) =
+                    ws.cut_instance(frame, i, |p| usize::from(copy_of[piece(p).min(MAX_CUT_PIECES - 1)] == made))
+                else {
+                    break;
+                };
+                at[made] = new;
+                made += 1;
+            }
+            if made < 2 {
+                continue;
+            }
             self.marks[whole] = true;
-            poses.push(placed(pa, i));
-            verdicts.push(va);
-            self.marks.push(false);
-            if self.carried.len() < self.carried.capacity() {
-                self.carried.push(CutHint { class_id: pa.class_id, centres: self.centres[j] });
+            for t in (0..made).rev() {
+                let inst = ws.instances[at[t]];
+                let pose = self.poses.as_slice()[taken[t].1];
+                poses.push(ObjectPose { instance_id: at[t] as u16, bbox: inst.bbox, mask_pixels: inst.pixels, ..pose });
+                verdicts.push(self.verdicts[taken[t].1]);
+                self.marks.push(false);
+            }
+            // A stream carries cuts in two ([`CutHint`]); one into more is
+            // made again by the next frame's second look. A refitted cut
+            // follows the copies' poses: their centres place it.
+            if made == 2 && self.carried.len() < self.carried.capacity() {
+                let pose = |t: usize| self.poses.as_slice()[taken[t].1];
+                let centre = |t: usize| match self.config.refit {
+                    true => pose(t).translation.map(|x| x as f32).into(),
+                    false => centres[taken[t].0],
+                };
+                self.carried.push(CutHint { class_id: pose(0).class_id, centres: [centre(0), centre(1)] });
             }
             kept += 1;
         }

@@ -272,7 +272,7 @@ impl Verifier {
         let Some(class) = (pose.class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
             return fail;
         };
-        let (samples, thin) = (&self.samples[class], self.thin[class]);
+        let samples = &self.samples[class];
         let (w, h) = (frame.width(), frame.height());
         if w == 0 || h == 0 || mask.ids.len() < w * h {
             return fail;
@@ -414,29 +414,7 @@ impl Verifier {
             _ => 0.0,
         };
         let fit = inlier_fraction * mask_coverage * (1.0 - behind_fraction) * (1.0 - off_plane);
-        // A pose 1-3 cm off leaves many samples off the depth; when the samples
-        // that do agree lie in the mask, the pose is on the object, not on a ghost region.
-        let agreeing =
-            mask_agreement >= cfg.agreeing_mask_agreement && self.diameters[class] >= cfg.agreeing_min_diameter_m;
-        let (min_inliers, min_fit) = if agreeing {
-            (cfg.agreeing_min_inlier_fraction.min(cfg.min_inlier_fraction), cfg.agreeing_min_fit.min(cfg.min_fit))
-        } else {
-            (cfg.min_inlier_fraction, cfg.min_fit)
-        };
-        let passed = off_plane <= cfg.max_off_plane
-            && inlier_fraction >= min_inliers
-            && fit >= min_fit
-            && behind_fraction <= cfg.max_behind_fraction
-            && depth_residual_m.is_finite()
-            && depth_residual_m <= cfg.max_residual_m
-            && depth_support >= cfg.min_depth_support
-            && plane_continuation <= cfg.max_plane_continuation
-            && if thin {
-                mask_agreement >= cfg.min_thin_mask_agreement
-            } else {
-                depth_continuity <= cfg.max_depth_continuity
-            };
-        Verification {
+        let mut verdict = Verification {
             fit,
             depth_residual_m,
             inlier_fraction,
@@ -449,8 +427,52 @@ impl Verifier {
             mask_agreement,
             region_probability: f32::NAN,
             judged_cells: judged,
-            passed,
-        }
+            passed: false,
+        };
+        verdict.passed = self.passes(class, &verdict, fit);
+        verdict
+    }
+
+    /// Whether verdict `v` of a pose of class index `class` passes every
+    /// threshold of [`VerifyConfig`], its fit taken as `fit`.
+    fn passes(&self, class: usize, v: &Verification, fit: f32) -> bool {
+        let cfg = &self.config;
+        // A pose 1-3 cm off leaves many samples off the depth; when the samples
+        // that do agree lie in the mask, the pose is on the object, not on a ghost region.
+        let agreeing =
+            v.mask_agreement >= cfg.agreeing_mask_agreement && self.diameters[class] >= cfg.agreeing_min_diameter_m;
+        let (min_inliers, min_fit) = if agreeing {
+            (cfg.agreeing_min_inlier_fraction.min(cfg.min_inlier_fraction), cfg.agreeing_min_fit.min(cfg.min_fit))
+        } else {
+            (cfg.min_inlier_fraction, cfg.min_fit)
+        };
+        v.off_plane <= cfg.max_off_plane
+            && v.inlier_fraction >= min_inliers
+            && fit >= min_fit
+            && v.behind_fraction <= cfg.max_behind_fraction
+            && v.depth_residual_m.is_finite()
+            && v.depth_residual_m <= cfg.max_residual_m
+            && v.depth_support >= cfg.min_depth_support
+            && v.plane_continuation <= cfg.max_plane_continuation
+            && if self.thin[class] {
+                v.mask_agreement >= cfg.min_thin_mask_agreement
+            } else {
+                v.depth_continuity <= cfg.max_depth_continuity
+            }
+    }
+
+    /// Whether verdict `v` of a pose of `class_id` passes every term but the
+    /// share of its mask it covers: the pose explains its part of the mask
+    /// as well as a passing pose explains all of its own (its fit with the
+    /// coverage taken as 1), and the segmenter's certainty, where judged,
+    /// held. A region holding several copies gives one of them such a pose
+    /// ([`crate::recut`]).
+    pub fn passes_but_for_coverage(&self, class_id: u16, v: &Verification) -> bool {
+        let Some(class) = (class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
+            return false;
+        };
+        let certain = v.region_probability.is_nan() || v.region_probability >= self.config.min_region_probability;
+        v.mask_coverage > 0.0 && certain && self.passes(class, v, v.fit / v.mask_coverage)
     }
 }
 

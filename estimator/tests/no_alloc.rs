@@ -195,8 +195,16 @@ fn instance_planes_do_not_allocate_after_warm_up() {
 
 #[test]
 fn the_second_look_does_not_allocate_after_warm_up() {
+    use fusepose_estimator::recut::{RecutConfig, RecutPoses};
+    second_look_without_allocations(RecutConfig::DEFAULT, false);
+    // Cuts into three, the regions of failed poses looked at too, cuts refitted to the pieces' poses.
+    let heaps = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, refit: true, ..RecutConfig::DEFAULT };
+    second_look_without_allocations(heaps, true);
+}
+
+fn second_look_without_allocations(recut_config: fusepose_estimator::recut::RecutConfig, rows_of_three: bool) {
     use fusepose_estimator::interpenetration::Solids;
-    use fusepose_estimator::recut::{Recut, RecutConfig};
+    use fusepose_estimator::recut::Recut;
     use fusepose_estimator::verify::{Verifier, VerifyConfig};
 
     let l = l_block();
@@ -207,7 +215,7 @@ fn the_second_look_does_not_allocate_after_warm_up() {
     let mut pieces = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
     let mut verifier = Verifier::new(&objects, VerifyConfig::default());
     let solids = std::sync::Arc::new(Solids::new(&objects));
-    let mut recut = Recut::new(&objects, solids, config, RecutConfig::DEFAULT).unwrap();
+    let mut recut = Recut::new(&objects, solids, config, recut_config).unwrap();
     let mut poses = PoseSet::with_capacity(2 * config.max_instances);
     let mut verdicts = Vec::with_capacity(2 * config.max_instances);
     let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| {
@@ -226,18 +234,22 @@ fn the_second_look_does_not_allocate_after_warm_up() {
     // Warm-up on a frame where no region qualifies: the first pair comes later.
     let single = painted(render(&[(1, &l, pose([0.0, 0.0, 1.0], 10.0, [0.0, 0.0, 0.5]))]));
     assert_eq!(frame_of(&single, 0), (0, 1));
-    let pair = |deg: f64, y: f64| {
-        painted(render(&[
-            (1, &l, pose([0.0, 0.0, 1.0], deg, [-0.04, y, 0.5])),
-            (1, &l, pose([0.0, 0.0, 1.0], deg, [0.04, y, 0.5])),
-        ]))
+    let row = |deg: f64, y: f64, xs: &[f64]| {
+        let objects: Vec<_> = xs.iter().map(|&x| (1, &l, pose([0.0, 0.0, 1.0], deg, [x, y, 0.5]))).collect();
+        painted(render(&objects))
     };
-    let frames = [pair(10.0, 0.0), single, pair(10.0, 0.02)];
+    let (copies, xs): (usize, &[f64]) = if rows_of_three { (3, &[-0.085, 0.0, 0.085]) } else { (2, &[-0.04, 0.04]) };
+    let frames = [row(10.0, 0.0, xs), single, row(10.0, 0.02, xs)];
     for (i, frame) in frames.iter().enumerate() {
         let mut outcome = (0, 0);
         let n = allocations_in(|| outcome = frame_of(frame, 10 + i as u64));
         assert_eq!(n, 0, "frame {i}: {n} allocations in prepare, estimate, verification and the second look");
-        let expected = if i == 1 { (0, 1) } else { (1, 2) };
-        assert_eq!(outcome, expected, "frame {i}: (cuts kept, poses)");
+        // A cut into three needs the region's first pose to cover a third
+        // of it or less; ICP's pose there depends on the seed.
+        let expected = if i == 1 { (0, 1..=1) } else { (1, 2..=copies) };
+        assert!(
+            outcome.0 == expected.0 && expected.1.contains(&outcome.1),
+            "frame {i}: (cuts kept, poses) {outcome:?}"
+        );
     }
 }

@@ -12,7 +12,7 @@ use std::sync::Arc;
 use common::{BoxObject, SyntheticFrame, l_block, object_set, painted, render};
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
 use fusepose_estimator::interpenetration::Solids;
-use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutStats};
+use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutPoses, RecutStats, pieces_for};
 use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
@@ -132,7 +132,8 @@ fn votes_for_two_centres_cut_the_region_along_them() {
     let votes = Votes(|u, _| centre_cell(if (u as f64) < common::intrinsics().cx { -0.04 } else { 0.04 }));
     let objects = object_set(&[l_block()]);
     let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
-    let config = RecutConfig { proposal: CutProposal::VotesOnly, ..RecutConfig::DEFAULT };
+    // The votes' own cut (refit would move it to the pieces' poses).
+    let config = RecutConfig { proposal: CutProposal::VotesOnly, refit: false, ..RecutConfig::DEFAULT };
     let out = second_look_voted(&frame.view(), config, &mut icp, Some(votes), None);
     assert_eq!((out.before, out.stats.tried, out.stats.by_votes, out.stats.kept), (1, 1, 1, 1));
     let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
@@ -262,7 +263,7 @@ fn one_object_cut_in_two_is_kept_whole_by_each_two_copy_term() {
     let truth = pose(10.0, [0.0, 0.0, 0.5]);
     let frame = painted(render(&[(1, &l, truth)]));
     let view = frame.view();
-    let looked = RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT };
+    let looked = RecutConfig { max_coverage: 1.01, refit: false, ..RecutConfig::DEFAULT };
     let all_off = RecutConfig { min_separation: 0.0, max_cross_explained: 9.0, max_overlap: 9.0, ..looked };
     let run = |config| second_look_with(&view, config, &mut Oracle(vec![truth]));
     // Each term alone refuses the cut; with none of them it would stand.
@@ -271,7 +272,10 @@ fn one_object_cut_in_two_is_kept_whole_by_each_two_copy_term() {
         ("separation", RecutConfig { min_separation: looked.min_separation, ..all_off }),
         ("cross-explanation", RecutConfig { max_cross_explained: looked.max_cross_explained, ..all_off }),
         ("overlap", RecutConfig { max_overlap: looked.max_overlap, ..all_off }),
+        // Both pieces posed as the one block: its box takes every pixel.
+        ("refit", RecutConfig { refit: true, ..all_off }),
         ("all", looked),
+        ("the default", RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT }),
     ] {
         let out = run(config);
         assert_eq!(out.stats.tried, 1, "{term}: the region was looked at again");
@@ -431,4 +435,86 @@ fn a_deferred_cut_the_next_frame_refuses_is_not_deferred_again_for_a_while() {
     }
     stream.recut.defer_next_frame();
     assert_eq!(stream.frame(&single, 40).1.deferred, 1, "after REFUSED_FRAMES it may be tried again");
+}
+
+/// Three L blocks in a row, 5 mm apart, painted alike: one class-1 region.
+/// (Touching, the cut between them misses their contacts: k-means places
+/// it midway between the blocks' centroids, which lie off their boxes'
+/// centres in an L, and one piece's pose then fails.)
+fn row_of_three(l: &BoxObject) -> SyntheticFrame {
+    let at = |x: f64| (1, l, pose(10.0, [x, 0.0, 0.5]));
+    painted(render(&[at(-0.085), at(0.0), at(0.085)]))
+}
+
+#[test]
+fn three_touching_copies_are_cut_into_three_when_the_pieces_allow() {
+    let l = l_block();
+    let frame = row_of_three(&l);
+    let config = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, ..RecutConfig::DEFAULT };
+    let out = second_look(&frame.view(), config);
+    assert_eq!(out.before, 1, "one region, one pose before the second look");
+    assert_eq!((out.stats.tried, out.stats.kept), (1, 1), "the region is cut and the cut kept");
+    assert_eq!(out.poses.len(), 3, "a pose per copy");
+    assert_eq!(out.ws.instances.len(), 3, "the workspace holds the three pieces");
+    assert!(out.verdicts.iter().all(|v| v.passed));
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    for (x, truth) in xs.iter().zip([-0.08, 0.0, 0.08]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
+    for p in out.poses.as_slice() {
+        let inst = out.ws.instances[p.instance_id as usize];
+        assert_eq!((p.bbox, p.mask_pixels), (inst.bbox, inst.pixels), "each pose carries its own piece");
+    }
+    // Cut in two at most, the region cannot become three copies.
+    let two = second_look(&frame.view(), RecutConfig { max_pieces: 2, ..config });
+    assert!(two.poses.len() < 3, "{} poses from a cut in two", two.poses.len());
+}
+
+#[test]
+fn the_region_of_a_failed_pose_is_looked_at_unless_only_passed_poses_are() {
+    let l = l_block();
+    let frame = row_of_three(&l);
+    let config = RecutConfig { poses: RecutPoses::Passed, ..RecutConfig::DEFAULT };
+    let passed = second_look(&frame.view(), config);
+    assert!(!passed.verdicts[0].passed, "one pose cannot explain three blocks");
+    assert_eq!(passed.stats.tried, 0, "with `passed`, a failed pose's region is not cut");
+    assert_eq!(passed.poses.len(), 1);
+    let any = second_look(&frame.view(), RecutConfig::DEFAULT);
+    assert_eq!((any.stats.tried, any.poses.len()), (1, 3), "the default looks at it: a pose per block");
+}
+
+#[test]
+fn pieces_follow_the_share_one_pose_covers() {
+    assert_eq!(pieces_for(0.9, 6), 2, "at least two");
+    assert_eq!(pieces_for(0.5, 6), 2);
+    assert_eq!(pieces_for(0.45, 6), 3, "rounded up: a pose between copies covers more than one");
+    assert_eq!(pieces_for(0.34, 6), 3);
+    assert_eq!(pieces_for(0.3, 6), 4);
+    assert_eq!(pieces_for(0.3, 3), 3, "at most the configured count");
+    assert_eq!(pieces_for(0.0, 6), 6, "no coverage: the most");
+    for (s, poses) in [("passed", RecutPoses::Passed), ("coverage", RecutPoses::Coverage), ("any", RecutPoses::Any)] {
+        assert_eq!(s.parse::<RecutPoses>(), Ok(poses));
+        assert_eq!(poses.to_string(), s);
+    }
+    let err = "all".parse::<RecutPoses>().unwrap_err();
+    assert!(err.contains("passed, coverage or any"), "{err}");
+}
+
+#[test]
+fn refitting_the_cut_to_the_pieces_poses_separates_touching_l_blocks() {
+    let l = l_block();
+    let at = |x: f64| (1, &l, pose(10.0, [x, 0.0, 0.5]));
+    let frame = painted(render(&[at(-0.08), at(0.0), at(0.08)]));
+    let config = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, refit: false, ..RecutConfig::DEFAULT };
+    let plain = second_look(&frame.view(), config);
+    assert!(plain.poses.len() < 3, "between point clusters the cut misses the contacts: {} poses", plain.poses.len());
+    let out = second_look(&frame.view(), RecutConfig { refit: true, ..config });
+    assert_eq!((out.stats.tried, out.stats.kept), (1, 1));
+    assert_eq!(out.poses.len(), 3, "a pose per block once the pixels follow the pieces' poses");
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    for (x, truth) in xs.iter().zip([-0.08, 0.0, 0.08]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
 }
