@@ -709,14 +709,12 @@ impl Recut {
         self.candidates.clear();
         for (k, v) in verdicts.iter().enumerate() {
             let (coverage, pose) = (v.mask_coverage, &poses[k]);
-            let min_probability = verifier.config().min_region_probability;
-            let certain = v.region_probability.is_nan() || v.region_probability >= min_probability;
             let supported = v.passed
                 || (!crate::alternates::is_alternate(instances, pose)
                     && match self.config.poses {
                         RecutPoses::Passed => false,
                         RecutPoses::Coverage => verifier.passes_but_for_coverage(pose.class_id, v),
-                        RecutPoses::Any => certain,
+                        RecutPoses::Any => verifier.region_certain(v),
                     });
             if supported && coverage < self.config.max_coverage && pose.class_id as usize <= self.sides.len() {
                 self.candidates.push(Candidate { pose: k, coverage, pieces: 0, base: 0 });
@@ -803,24 +801,20 @@ impl Recut {
                 }
                 true
             });
-            let mut vote_cut = None;
-            if let Some(seg) = voted {
-                for k in (2..=most).rev() {
+            // The most pieces whose vote groups lie apart and are even.
+            let vote_cut = voted.and_then(|seg| {
+                (2..=most).rev().find_map(|k| {
                     let c = kmeans(&self.sample_votes, k, &mut self.cluster[..n], &mut self.order);
                     let gap = (0..k)
                         .flat_map(|a| (a + 1..k).map(move |b| (a, b)))
                         .map(|(a, b)| ((c[a][0] - c[b][0]).powi(2) + (c[a][1] - c[b][1]).powi(2)).sqrt())
                         .fold(f32::INFINITY, f32::min);
-                    if gap >= MIN_VOTE_GAP_CELLS && even(&self.cluster[..n], k) {
-                        let mut cells = [[0.0f32; 2]; MAX_CUT_PIECES];
-                        for (cell, centre) in cells.iter_mut().zip(&c).take(k) {
-                            *cell = [centre[0], centre[1]];
-                        }
-                        vote_cut = Some((seg, cells, k));
-                        break;
-                    }
-                }
-            }
+                    (gap >= MIN_VOTE_GAP_CELLS && even(&self.cluster[..n], k)).then(|| {
+                        let cells: [[f32; 2]; MAX_CUT_PIECES] = std::array::from_fn(|i| [c[i][0], c[i][1]]);
+                        (seg, cells, k)
+                    })
+                })
+            });
             let ids = &mut self.ids;
             let mut fill = |piece_of: &dyn Fn(usize, usize, usize) -> usize| {
                 for v in v0..=v1 {

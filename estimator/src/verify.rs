@@ -471,8 +471,13 @@ impl Verifier {
         let Some(class) = (class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
             return false;
         };
-        let certain = v.region_probability.is_nan() || v.region_probability >= self.config.min_region_probability;
-        v.mask_coverage > 0.0 && certain && self.passes(class, v, v.fit / v.mask_coverage)
+        v.mask_coverage > 0.0 && self.region_certain(v) && self.passes(class, v, v.fit / v.mask_coverage)
+    }
+
+    /// Whether the segmenter was sure enough of the region of verdict `v`
+    /// ([`VerifyConfig::min_region_probability`]); true where not judged.
+    pub fn region_certain(&self, v: &Verification) -> bool {
+        v.region_probability.is_nan() || v.region_probability >= self.config.min_region_probability
     }
 }
 
