@@ -23,6 +23,8 @@ pub struct VideoFrame {
     pub labels: Vec<u16>,
     /// (class id, object → camera pose) of every object in the scene.
     pub truth: Vec<(u16, Pose)>,
+    /// Each truth's visible fraction in this frame (same order).
+    pub visible: Vec<f64>,
 }
 
 impl VideoFrame {
@@ -54,22 +56,58 @@ pub fn render_video(
     degrees_per_frame: f64,
     seed: u64,
 ) -> anyhow::Result<Video> {
-    render_video_with(set, objects, false, frames, degrees_per_frame, seed)
+    render_video_with(set, objects, Copies::None, frames, degrees_per_frame, seed)
 }
 
-/// As [`render_video`]; with `pair`, one of the drawn classes stands twice,
-/// the copies side by side and touching (0–3 mm apart).
+/// Several copies of one class in a video's scene ([`render_video_with`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum Copies {
+    /// One object per class.
+    #[default]
+    None,
+    /// One of the drawn classes stands twice, the copies side by side and
+    /// touching (0–3 mm apart).
+    Pair,
+    /// One of the drawn classes as a heap of 4–8 copies touching and lying
+    /// on each other (the sampler's heap).
+    Heap,
+}
+
+impl Copies {
+    /// The producer argument's suffix (`5:pair`, `5:heap`).
+    pub fn suffix(self) -> &'static str {
+        match self {
+            Self::None => "",
+            Self::Pair => ":pair",
+            Self::Heap => ":heap",
+        }
+    }
+
+    /// `OBJECTS[:pair|:heap]` → (objects, copies).
+    pub fn parse_arg(arg: &str) -> anyhow::Result<(usize, Self)> {
+        let (n, copies) = match arg.split_once(':') {
+            Some((n, "pair")) => (n, Self::Pair),
+            Some((n, "heap")) => (n, Self::Heap),
+            Some((_, other)) => anyhow::bail!("{arg:?}: expected OBJECTS, OBJECTS:pair or OBJECTS:heap, not {other:?}"),
+            None => (arg, Self::None),
+        };
+        Ok((n.parse()?, copies))
+    }
+}
+
+/// As [`render_video`], with `copies` of one drawn class.
 pub fn render_video_with(
     set: &ObjectSet,
     objects: usize,
-    pair: bool,
+    copies: Copies,
     frames: usize,
     degrees_per_frame: f64,
     seed: u64,
 ) -> anyhow::Result<Video> {
     let intrinsics = Intrinsics::YCB_VIDEO;
     let cfg = SamplerConfig {
-        pair_probability: if pair { 1.0 } else { 0.0 },
+        pair_probability: if copies == Copies::Pair { 1.0 } else { 0.0 },
+        heap_probability: if copies == Copies::Heap { 1.0 } else { 0.0 },
         min_objects: objects,
         max_objects: objects,
         camera_distance_m: (0.7, 0.9),
@@ -102,6 +140,7 @@ pub fn render_video_with(
             depth: render_target.depth_u16().to_vec(),
             labels: render_target.labels().to_vec(),
             truth: truth.objects.iter().map(|o| (o.class_id, o.pose)).collect(),
+            visible: truth.objects.iter().map(|o| o.visible_fraction).collect(),
         });
     }
     Ok(Video { intrinsics, frames: out, degrees_per_frame })

@@ -85,7 +85,13 @@ fn e2e_smoke_poses_frames_through_daemon_and_consumer() {
     let v = &v[1..];
     assert!(v[0] > 0.0 && v[3] > 0.0 && v[8] > 0.0 && v[8] <= v[11], "{v:?}");
     assert!(text.contains("5.00 objects per message"), "every message poses the 5 labelled objects:\n{text}");
-    assert!(out.join("e2e.png").exists() && out.join("e2e.hlog").exists());
+    // The consumer scored the poses against the video's truth: most are found.
+    let line = text.lines().find(|l| l.contains("true objects >=")).expect("an accuracy line");
+    let count = |before: &str| -> f64 {
+        line.split(before).next().and_then(|s| s.rsplit(' ').next()).and_then(|s| s.parse().ok()).unwrap()
+    };
+    let (visible, found) = (count(" true objects >="), count(" found ("));
+    assert!(visible > 0.0 && found >= 0.5 * visible, "{line}");
     let _ = std::fs::remove_dir_all(out);
 }
 

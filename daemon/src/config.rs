@@ -258,11 +258,12 @@ pub struct EstimatorConfig {
     /// that class too, and the better-verified pose is kept
     /// (`fusepose_estimator::alternates`). 0 = off.
     pub class_alternates: f32,
-    /// With verification, on class-label planes: a region whose verified
-    /// pose covers less than this share of it (two copies side by side that
-    /// passed as one) is cut in two, each piece estimated, and the cut kept
-    /// when both poses pass and are two copies by the depth image
-    /// (`fusepose_estimator::recut`). 0 = off.
+    /// With verification, on class-label planes: a region whose pose covers
+    /// less than this share of it (copies side by side that passed as one)
+    /// is cut (`recut_pieces`), each piece estimated, and the cut kept when
+    /// two poses or more pass and are copies by the depth image
+    /// (`fusepose_estimator::recut`). Failed poses are dropped after it has
+    /// looked (`recut_poses`). 0 = off.
     pub recut: f32,
     /// `recut`: where the cut comes from: `votes` (the segmenter's
     /// centre-offset votes where its file has the head and they point at two

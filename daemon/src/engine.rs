@@ -477,8 +477,8 @@ const POST_ESTIMATE_MARGIN: f64 = 1.5;
 const POST_ESTIMATE_GAIN: f64 = 0.1;
 
 /// Checks each pose against the frame's depth and its instance mask into
-/// `verdicts` (same order) and returns how many failed; with `drop` removes
-/// those poses. No allocation.
+/// `verdicts` (same order); [`drop_failed`] removes the failures once the
+/// second look has seen them. No allocation.
 /// `segmenter`: the built-in segmenter when it made this frame's regions (its
 /// class probabilities are judged too). Of a region estimated as two classes
 /// (`fusepose_estimator::alternates`) only the better-verified pose stays,
@@ -490,12 +490,11 @@ fn verify_poses(
     segmenter: Option<&SegEngine>,
     poses: &mut PoseSet,
     verdicts: &mut Vec<Verification>,
-    drop: bool,
     frame: &FrameView<'_>,
     marks: &mut Vec<bool>,
-) -> usize {
+) {
     verdicts.clear();
-    let (Some(verifier), Some(ws)) = (verifier, ws) else { return 0 };
+    let (Some(verifier), Some(ws)) = (verifier, ws) else { return };
     let min_region_probability = verifier.config().min_region_probability;
     for pose in poses.as_slice() {
         let v = match ws.component_id(pose.instance_id as usize) {
@@ -523,6 +522,15 @@ fn verify_poses(
     if any_alternate && alternates::losers(poses.as_slice(), |i| verdicts[i].class_score(), marks) > 0 {
         poses.remove_marked(marks);
         fusepose_estimator::poses::remove_marked(verdicts, marks);
+    }
+}
+
+/// Counts the poses whose verification failed and, with `drop`, removes
+/// them (keeping `verdicts` in step). Without verdicts (verification off)
+/// nothing is counted or dropped.
+fn drop_failed(poses: &mut PoseSet, verdicts: &mut Vec<Verification>, drop: bool) -> usize {
+    if verdicts.len() != poses.len() {
+        return 0;
     }
     let failed = verdicts.iter().filter(|v| !v.passed).count();
     if drop {
@@ -800,13 +808,15 @@ impl PoseEngine {
                     .as_ref()
                     .filter(|_| used_segmenter)
                     .map(|s| s.lock().unwrap_or_else(|e| e.into_inner()));
-                self.failed_verification = verify_poses(
+                // Failed poses stay until the second look has seen them: in a
+                // heap the one pose of several copies fails, and the second
+                // look cuts its region (`recut_poses = "any"`), as in `fusepose eval`.
+                verify_poses(
                     self.verifier.as_mut(),
                     self.workspace.as_ref(),
                     seg.as_deref(),
                     &mut self.poses,
                     &mut self.verdicts,
-                    self.verify_drop,
                     frame,
                     &mut self.duplicate_marks,
                 );
@@ -849,6 +859,7 @@ impl PoseEngine {
                     };
                 }
                 drop(seg);
+                self.failed_verification = drop_failed(&mut self.poses, &mut self.verdicts, self.verify_drop);
                 self.rejected = if self.verify_drop { self.failed_verification } else { 0 };
                 drop_explained(
                     self.verifier.as_mut(),

@@ -33,7 +33,7 @@ pub mod workspace;
 pub use frame::{ColorFormat, DepthCensus, DepthPlane, FrameError, FrameView, LabelPlane};
 pub use icp::{IcpConfig, IcpEstimator};
 pub use poses::{ObjectPose, PoseSet};
-pub use workspace::{CutHint, Instance, PrepareStats, Workspace, WorkspaceConfig, WorkspaceConfigError};
+pub use workspace::{CutHint, HintedCut, Instance, PrepareStats, Workspace, WorkspaceConfig, WorkspaceConfigError};
 
 /// Everything that turns a validated frame (with instances already in the
 /// workspace) into poses. Implemented by the ICP baseline and the fusion network.

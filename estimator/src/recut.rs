@@ -31,15 +31,15 @@
 //! region of several copies they point at one centre (their k-means centres
 //! 2–16 mm apart where copies lie 20–50 mm apart; session 30).
 //!
-//! In a live stream the second look rarely has the time: two pieces'
-//! estimates and checks cost more than a busy frame leaves. So a cut in two
-//! that stood is carried to the next frame ([`Recut::hints`] →
-//! [`Workspace::set_cut_hints`]): the region is cut before the estimate and
-//! its pieces are posed with the frame's other objects, then judged by the
-//! same terms ([`RecutStats::carried`]); a frame without the time for the
-//! pieces defers its cuts to the next frame that way
-//! ([`Recut::defer_next_frame`]), and a deferred cut the next frame refuses
-//! keeps that place whole for [`REFUSED_FRAMES`] frames.
+//! In a live stream the second look rarely has the time: the pieces'
+//! estimates and checks cost more than a busy frame leaves. So a cut that
+//! stood is carried to the next frame with a centre per copy
+//! ([`Recut::hints`] → [`Workspace::set_cut_hints`]): the region is cut
+//! before the estimate and its pieces are posed with the frame's other
+//! objects, then judged by the same terms ([`RecutStats::carried`]); a
+//! frame without the time for the pieces defers its cuts to the next frame
+//! that way ([`Recut::defer_next_frame`]), and a deferred cut the next frame
+//! refuses keeps that place whole for [`REFUSED_FRAMES`] frames.
 //!
 //! Class planes only: an instance plane's instances are the producer's.
 //! Buffers are sized in [`Recut::new`] and on the first frame of a size;
@@ -52,13 +52,12 @@ use crate::poses::{ObjectPose, PoseSet};
 use crate::seg::SegEngine;
 use crate::split::{kmeans, nearest_2d, nearest_piece, project};
 use crate::verify::{MaskRef, Verification, Verifier};
+pub use crate::workspace::MAX_CUT_PIECES;
 use crate::workspace::{CutHint, Workspace, WorkspaceConfig, WorkspaceConfigError};
 use crate::{EstimateError, Estimator};
 
 /// Points per region the cut clusters.
 const SAMPLES: usize = 128;
-/// Most pieces one region is cut into ([`RecutConfig::max_pieces`]).
-pub const MAX_CUT_PIECES: usize = 6;
 /// Frames for which a deferred cut that the next frame refused is not
 /// deferred again near the same place (one second at 24 FPS).
 pub const REFUSED_FRAMES: u32 = 24;
@@ -394,8 +393,8 @@ impl Recut {
     /// The cuts that stood in the last [`Recut::run`]: the second look's
     /// kept cuts and the carried cuts that held again. A live stream passes
     /// them to [`Workspace::set_cut_hints`] before its next frame's prepare,
-    /// so that a pair cut once is estimated as two instances in the frame's
-    /// own estimate from then on (the second look itself needs time a busy
+    /// so that copies cut apart once are estimated as an instance each in the
+    /// frame's own estimate from then on (the second look itself needs time a busy
     /// frame does not have). Frames that are not a stream (an evaluation's
     /// independent views) must not.
     pub fn hints(&self) -> &[CutHint] {
@@ -626,9 +625,13 @@ impl Recut {
     }
 
     /// Judges the pieces of the cuts `ws` made from carried hints as the
-    /// second look judges its own: a cut that holds is carried on; of one
-    /// that does not, the piece pose that fits worse is dropped (the two are
-    /// one object seen twice) and the cut is forgotten. Returns how many held.
+    /// second look judges its own ([`Recut::copies`]): best fit first, a
+    /// piece is a copy when its pose passed and it is two copies with each
+    /// copy taken before it. A cut with two copies or more holds and is
+    /// carried on with their centres; the poses of its other pieces go (each
+    /// is one of the copies seen again, or failed). Of a cut that does not
+    /// hold, only its best pose stays (the pieces are one object seen
+    /// several times) and the cut is forgotten. Returns how many held.
     fn check_hinted(
         &mut self,
         view: &FrameView<'_>,
@@ -641,32 +644,75 @@ impl Recut {
         self.marks.resize(poses.len(), false);
         let terms = Terms { config: &self.config, sides: &self.sides, solids: &self.solids };
         let mut held = 0;
-        for &[ida, idb] in ws.hinted_pieces() {
-            let find =
-                |id: u32| poses.as_slice().iter().position(|p| ws.component_id(p.instance_id as usize) == Some(id));
-            let (Some(a), Some(b)) = (find(ida), find(idb)) else { continue };
-            let (pa, pb) = (poses.as_slice()[a], poses.as_slice()[b]);
-            let (ma, mb) = (ws.mask_ref(ida, pa.bbox), ws.mask_ref(idb, pb.bbox));
-            if terms.two_copies(view, verifier, (&pa, &verdicts[a], ma), (&pb, &verdicts[b], mb)).is_ok() {
-                let centre = |i: usize| {
+        for cut in ws.hinted_pieces() {
+            // Each piece's pose, best fit first.
+            let mut found = [(0.0f32, 0usize); MAX_CUT_PIECES];
+            let mut n = 0;
+            for &id in cut.ids() {
+                let at = poses.as_slice().iter().position(|p| ws.component_id(p.instance_id as usize) == Some(id));
+                if let Some(a) = at {
+                    found[n] = (verdicts[a].fit, a);
+                    n += 1;
+                }
+            }
+            if n < 2 {
+                continue;
+            }
+            let found = &mut found[..n];
+            found.sort_unstable_by(|x, y| y.0.total_cmp(&x.0));
+            let pose_mask = |a: usize| {
+                let p = poses.as_slice()[a];
+                (p, ws.component_id(p.instance_id as usize).map(|id| ws.mask_ref(id, p.bbox)))
+            };
+            let mut taken = [0usize; MAX_CUT_PIECES];
+            let mut count = 0;
+            for &(_, a) in found.iter().filter(|&&(_, a)| verdicts[a].passed) {
+                let (pa, Some(ma)) = pose_mask(a) else { continue };
+                let copy = taken[..count].iter().all(|&t| {
+                    let (pt, Some(mt)) = pose_mask(t) else { return false };
+                    terms.two_copies(view, verifier, (&pa, &verdicts[a], ma), (&pt, &verdicts[t], mt)).is_ok()
+                });
+                if copy {
+                    taken[count] = a;
+                    count += 1;
+                }
+            }
+            let stays = |a: usize| match count >= 2 {
+                true => taken[..count].contains(&a),
+                // Refused: the first copy taken, else the best fit.
+                false => a == if count == 1 { taken[0] } else { found[0].1 },
+            };
+            for &(_, a) in found.iter() {
+                self.marks[a] = !stays(a);
+            }
+            if count >= 2 {
+                let centre = |a: usize| {
+                    let i = poses.as_slice()[a].instance_id as usize;
                     let inst = ws.instances[i];
                     let points = &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)];
                     let n = points.len().max(1) as f32;
                     points.iter().fold([0.0f32; 3], |c, p| [c[0] + p[0] / n, c[1] + p[1] / n, c[2] + p[2] / n])
                 };
-                if self.carried.len() < self.carried.capacity() {
-                    let centres = [centre(pa.instance_id as usize), centre(pb.instance_id as usize)];
-                    self.carried.push(CutHint { class_id: pa.class_id, centres });
+                let mut centres = [[0.0f32; 3]; MAX_CUT_PIECES];
+                for (c, &a) in centres.iter_mut().zip(&taken[..count]) {
+                    *c = centre(a);
+                }
+                if self.carried.len() < self.carried.capacity()
+                    && let Some(hint) = CutHint::new(poses.as_slice()[taken[0]].class_id, &centres[..count])
+                {
+                    self.carried.push(hint);
                 }
                 held += 1;
-            } else {
-                let worse = if verdicts[a].fit >= verdicts[b].fit { b } else { a };
-                self.marks[worse] = true;
-                if self.refused.len() < self.refused.capacity() {
-                    let (ta, tb) = (pa.translation, pb.translation);
-                    let midpoint = [(ta.x + tb.x) as f32 / 2.0, (ta.y + tb.y) as f32 / 2.0, (ta.z + tb.z) as f32 / 2.0];
-                    self.refused.push(Refused { class_id: pa.class_id, midpoint, frames: REFUSED_FRAMES });
+            } else if self.refused.len() < self.refused.capacity() {
+                let mut mid = [0.0f32; 3];
+                for &(_, a) in found.iter() {
+                    let t = poses.as_slice()[a].translation;
+                    for (m, x) in mid.iter_mut().zip([t.x, t.y, t.z]) {
+                        *m += x as f32 / n as f32;
+                    }
                 }
+                let class_id = poses.as_slice()[found[0].1].class_id;
+                self.refused.push(Refused { class_id, midpoint: mid, frames: REFUSED_FRAMES });
             }
         }
         if self.marks.iter().any(|&m| m) {
@@ -681,9 +727,13 @@ impl Recut {
     fn defer_cuts(&mut self, poses: &[ObjectPose]) -> usize {
         let mut deferred = 0;
         for (j, c) in self.candidates.iter().enumerate() {
-            // A deferred frame cuts in two only (see `cut`).
-            let (centres, class_id) = ([self.centres[j][0], self.centres[j][1]], poses[c.pose].class_id);
-            let mid = [0, 1, 2].map(|k| (centres[0][k] + centres[1][k]) / 2.0);
+            let (centres, class_id) = (&self.centres[j][..c.pieces as usize], poses[c.pose].class_id);
+            let mut mid = [0.0f32; 3];
+            for centre in centres {
+                for (m, x) in mid.iter_mut().zip(centre) {
+                    *m += x / centres.len() as f32;
+                }
+            }
             // The same place: within the object's smallest side.
             let reach = self.sides.get(class_id as usize - 1).copied().unwrap_or(0.0);
             let near = |r: &Refused| {
@@ -692,8 +742,10 @@ impl Recut {
             if self.refused.iter().any(near) || self.carried.len() >= self.carried.capacity() {
                 continue;
             }
-            self.carried.push(CutHint { class_id, centres });
-            deferred += 1;
+            if let Some(hint) = CutHint::new(class_id, centres) {
+                self.carried.push(hint);
+                deferred += 1;
+            }
         }
         deferred
     }
@@ -733,9 +785,7 @@ impl Recut {
     /// in 3D (every pixel to its nearest centre, by image distance to the
     /// projected centres where it has no depth). Pieces must be even enough
     /// ([`MIN_PIECE_SHARE`]); a candidate no count cuts evenly is dropped.
-    /// A frame whose pieces are deferred cuts in two only: the cut carried
-    /// to the next frame ([`CutHint`]) has two centres. Returns how many
-    /// were cut along votes.
+    /// Returns how many were cut along votes.
     fn cut(
         &mut self,
         frame: &FrameView<'_>,
@@ -744,7 +794,7 @@ impl Recut {
         votes: Option<&dyn CentreVotes>,
     ) -> usize {
         let voter = votes.filter(|_| self.config.proposal != CutProposal::Points);
-        let max_pieces = if self.defer.is_some() { 2 } else { self.config.pieces() };
+        let max_pieces = self.config.pieces();
         let (w, h) = (frame.width(), frame.height());
         for b in self.written.drain(..) {
             let [u0, v0, u1, v1] = b.map(|x| x as usize);
@@ -1017,16 +1067,20 @@ impl Recut {
                 verdicts.push(self.verdicts[taken[t].1]);
                 self.marks.push(false);
             }
-            // A stream carries cuts in two ([`CutHint`]); one into more is
-            // made again by the next frame's second look. A refitted cut
-            // follows the copies' poses: their centres place it.
-            if made == 2 && self.carried.len() < self.carried.capacity() {
-                let pose = |t: usize| self.poses.as_slice()[taken[t].1];
-                let centre = |t: usize| match self.config.refit {
+            // A stream carries the cut with a centre per copy ([`CutHint`]).
+            // A refitted cut follows the copies' poses: their centres place it.
+            let pose = |t: usize| self.poses.as_slice()[taken[t].1];
+            let mut at = [[0.0f32; 3]; MAX_CUT_PIECES];
+            for (t, c) in at.iter_mut().enumerate().take(made) {
+                *c = match self.config.refit {
                     true => pose(t).translation.map(|x| x as f32).into(),
                     false => centres[taken[t].0],
                 };
-                self.carried.push(CutHint { class_id: pose(0).class_id, centres: [centre(0), centre(1)] });
+            }
+            if self.carried.len() < self.carried.capacity()
+                && let Some(hint) = CutHint::new(pose(0).class_id, &at[..made])
+            {
+                self.carried.push(hint);
             }
             kept += 1;
         }

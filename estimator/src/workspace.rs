@@ -118,16 +118,54 @@ impl Instance {
 /// How far from a hint's projected centre its region may lie, pixels.
 pub const HINT_REACH_PX: usize = 12;
 
+/// Most pieces one cut carried between frames holds (and the most the
+/// second look cuts a region into, [`crate::recut::RecutConfig::max_pieces`]).
+pub const MAX_CUT_PIECES: usize = 6;
+
 /// A cut to make in the next [`Workspace::prepare`]: the region of class
-/// `class_id` nearest to the projections of both `centres` (camera frame,
-/// metres; within [`HINT_REACH_PX`]) is cut between them, each pixel to its
-/// nearer centre. The
-/// daemon carries a cut kept in one frame to the next this way
-/// ([`crate::recut`]), so the pieces enter that frame's own estimate.
+/// `class_id` onto which most of the centres project (camera frame, metres;
+/// within [`HINT_REACH_PX`], at least two) is cut between the centres that
+/// fall on it, each pixel to its nearest centre. The daemon carries a cut
+/// kept in one frame to the next this way ([`crate::recut`]), so the pieces
+/// enter that frame's own estimate; a centre whose copy has left the region
+/// (moved apart, or out of view) drops out of the cut.
 #[derive(Clone, Copy, Debug, PartialEq)]
 pub struct CutHint {
     pub class_id: u16,
-    pub centres: [[f32; 3]; 2],
+    centres: [[f32; 3]; MAX_CUT_PIECES],
+    pieces: u8,
+}
+
+impl CutHint {
+    /// A cut into one piece per centre: `None` for fewer than two centres
+    /// or more than [`MAX_CUT_PIECES`].
+    pub fn new(class_id: u16, centres: &[[f32; 3]]) -> Option<Self> {
+        if !(2..=MAX_CUT_PIECES).contains(&centres.len()) {
+            return None;
+        }
+        let mut all = [[0.0; 3]; MAX_CUT_PIECES];
+        all[..centres.len()].copy_from_slice(centres);
+        Some(Self { class_id, centres: all, pieces: centres.len() as u8 })
+    }
+
+    /// The pieces' centres, camera frame, metres.
+    pub fn centres(&self) -> &[[f32; 3]] {
+        &self.centres[..self.pieces as usize]
+    }
+}
+
+/// The pieces a hinted cut made in the last [`Workspace::prepare`]: their
+/// component ids ([`Workspace::component_ids`]), the region's own first.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+pub struct HintedCut {
+    ids: [u32; MAX_CUT_PIECES],
+    pieces: u8,
+}
+
+impl HintedCut {
+    pub fn ids(&self) -> &[u32] {
+        &self.ids[..self.pieces as usize]
+    }
 }
 
 /// What [`Workspace::prepare`] skipped in the last frame (for the daemon's counters).
@@ -169,7 +207,7 @@ pub struct Workspace {
     /// Cuts for the next frame ([`Workspace::set_cut_hints`]) and the
     /// component ids of the pieces they made in the last one.
     hints: Vec<CutHint>,
-    hinted: Vec<[u32; 2]>,
+    hinted: Vec<HintedCut>,
     stats: PrepareStats,
     /// Background points the support plane is fitted to, and the plane of the
     /// current frame (`None`: off, or no plane found).
@@ -375,20 +413,21 @@ impl Workspace {
         self.hints.extend(hints.iter().take(room));
     }
 
-    /// The component ids ([`Workspace::component_ids`]) of the two pieces
-    /// of each cut the last [`prepare`](Self::prepare) made from its hints.
-    pub fn hinted_pieces(&self) -> &[[u32; 2]] {
+    /// The pieces of each cut the last [`prepare`](Self::prepare) made from
+    /// its hints (the pieces that kept enough pixels; at least two).
+    pub fn hinted_pieces(&self) -> &[HintedCut] {
         &self.hinted
     }
 
-    /// Makes the hinted cuts whose two centres project onto (or within
-    /// [`HINT_REACH_PX`] of) one region of their class: a piece's centre can
-    /// lie off its own pixels (the notch of an L, the hole of a mug).
+    /// Makes the hinted cuts: each hint's centres project onto (or within
+    /// [`HINT_REACH_PX`] of) regions of its class, a piece's centre can lie
+    /// off its own pixels (the notch of an L, the hole of a mug); the region
+    /// most of them fall on is cut between those, when they are two or more.
     fn apply_hints(&mut self, frame: &FrameView<'_>, limits: InstanceLimits) {
         let (w, h) = (frame.width(), frame.height());
         for k in 0..self.hints.len() {
             let hint = self.hints[k];
-            let pixels = hint.centres.map(|c| crate::split::project(frame, Some(&c)));
+            let all = hint.centres();
             let ids = self.finder.component_ids();
             let components = self.finder.components();
             let of_class =
@@ -409,14 +448,41 @@ impl Workspace {
                 }
                 best.map(|(_, id)| id)
             };
-            let (Some(id), Some(other)) = (region_at(pixels[0]), region_at(pixels[1])) else { continue };
-            if id != other {
+            let mut pixels = [[0.0f32; 2]; MAX_CUT_PIECES];
+            let mut regions = [None; MAX_CUT_PIECES];
+            for (i, c) in all.iter().enumerate() {
+                pixels[i] = crate::split::project(frame, Some(c));
+                regions[i] = region_at(pixels[i]);
+            }
+            let regions = &regions[..all.len()];
+            let hits = |id: u32| regions.iter().filter(|&&r| r == Some(id)).count();
+            // The region most centres fall on (the first such on a tie).
+            let Some(id) = regions.iter().flatten().copied().max_by_key(|&id| (hits(id), std::cmp::Reverse(id))) else {
+                continue;
+            };
+            if hits(id) < 2 {
                 continue;
             }
-            let new_id = self.finder.next_split_id();
-            let piece = |p: usize| Some(crate::split::nearest_piece(frame, &hint.centres, &pixels, p));
-            if self.finder.split(id, limits, piece) == 1 {
-                self.hinted.push([id, new_id]);
+            let (mut centres, mut at) = ([[0.0f32; 3]; MAX_CUT_PIECES], [[0.0f32; 2]; MAX_CUT_PIECES]);
+            let mut m = 0;
+            for i in (0..all.len()).filter(|&i| regions[i] == Some(id)) {
+                (centres[m], at[m]) = (all[i], pixels[i]);
+                m += 1;
+            }
+            let first_new = self.finder.next_split_id();
+            let piece = |p: usize| Some(crate::split::nearest_piece(frame, &centres[..m], &at[..m], p));
+            if self.finder.split(id, limits, piece) == 0 || self.hinted.len() >= self.hinted.capacity() {
+                continue;
+            }
+            // The pieces still kept (a sliver under `min_pixels` is dropped).
+            let mut cut = HintedCut { ids: [0; MAX_CUT_PIECES], pieces: 0 };
+            let kept = |want: u32| self.finder.components().iter().any(|c| c.component_id == want);
+            for want in std::iter::once(id).chain((0..m as u32 - 1).map(|j| first_new + j)).filter(|&c| kept(c)) {
+                cut.ids[cut.pieces as usize] = want;
+                cut.pieces += 1;
+            }
+            if cut.pieces >= 2 {
+                self.hinted.push(cut);
             }
         }
     }

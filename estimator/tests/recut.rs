@@ -15,7 +15,7 @@ use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutPoses, RecutStats, pieces_for};
 use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
-use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_estimator::{CutHint, Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
@@ -516,5 +516,76 @@ fn refitting_the_cut_to_the_pieces_poses_separates_touching_l_blocks() {
     xs.sort_by(f64::total_cmp);
     for (x, truth) in xs.iter().zip([-0.08, 0.0, 0.08]) {
         assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
+}
+
+/// The poses' x, checked against the blocks' `truths` (sorted).
+fn assert_across(stream: &Stream, truths: &[f64]) {
+    let xs = stream.xs();
+    assert_eq!(xs.len(), truths.len(), "poses at {xs:.3?}");
+    for (x, truth) in xs.iter().zip(truths) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth:.3} m");
+    }
+}
+
+#[test]
+fn a_kept_cut_into_three_is_carried_with_a_centre_per_copy() {
+    let l = l_block();
+    let mut stream = Stream::with(RecutConfig { max_pieces: 4, ..RecutConfig::DEFAULT });
+    let (prepared, stats) = stream.frame(&row_of_three(&l), 7);
+    assert_eq!((prepared, stats.kept), (1, 1), "the second look cuts the row into three");
+    let hints = stream.recut.hints();
+    assert_eq!((hints.len(), hints[0].centres().len()), (1, 3), "carried with three centres");
+    // The row 5 mm further right: cut into three before the estimate, each posed, the cut held.
+    let shift = 0.005;
+    let at = |x: f64| (1, &l, pose(10.0, [x + shift, 0.0, 0.5]));
+    let moved = painted(render(&[at(-0.085), at(0.0), at(0.085)]));
+    let (prepared, stats) = stream.frame(&moved, 8);
+    assert_eq!(prepared, 3, "three instances enter the estimate");
+    assert_eq!(stream.ws.hinted_pieces().len(), 1);
+    assert_eq!(stream.ws.hinted_pieces()[0].ids().len(), 3);
+    assert_eq!((stats.carried, stats.tried), (1, 0), "the cut holds; nothing is left to look at again");
+    assert_across(&stream, &[-0.08 + shift, shift, 0.08 + shift]);
+    assert_eq!(stream.recut.hints()[0].centres().len(), 3, "and is carried on whole");
+}
+
+#[test]
+fn a_deferred_cut_into_three_is_made_whole_in_the_next_frames_estimate() {
+    let l = l_block();
+    let mut stream = Stream::with(RecutConfig { max_pieces: 4, ..RecutConfig::DEFAULT });
+    stream.recut.defer_next_frame();
+    let (_, stats) = stream.frame(&row_of_three(&l), 7);
+    assert_eq!((stats.tried, stats.deferred, stats.kept), (1, 1, 0), "cut, not estimated");
+    assert_eq!(stream.poses.len(), 1, "this frame keeps the region's pose");
+    assert_eq!(stream.recut.hints()[0].centres().len(), 3, "the deferred cut keeps its three pieces");
+    let (prepared, stats) = stream.frame(&row_of_three(&l), 8);
+    assert_eq!((prepared, stats.carried), (3, 1), "the next frame estimates the three pieces, and the cut holds");
+    assert_across(&stream, &[-0.08, 0.0, 0.08]);
+}
+
+#[test]
+fn a_copy_that_leaves_a_carried_cut_drops_out_of_it() {
+    let l = l_block();
+    let mut stream = Stream::with(RecutConfig { max_pieces: 4, ..RecutConfig::DEFAULT });
+    assert_eq!(stream.frame(&row_of_three(&l), 7).1.kept, 1);
+    // The right block taken away: its centre falls on the table, the other
+    // two still fall on one region, which is cut in two between them.
+    let at = |x: f64| (1, &l, pose(10.0, [x, 0.0, 0.5]));
+    let two = painted(render(&[at(-0.085), at(0.0)]));
+    let (prepared, stats) = stream.frame(&two, 8);
+    assert_eq!(prepared, 2, "cut between the two centres still on it");
+    assert_eq!(stream.ws.hinted_pieces()[0].ids().len(), 2);
+    assert_eq!(stats.carried, 1);
+    assert_across(&stream, &[-0.08, 0.0]);
+    assert_eq!(stream.recut.hints()[0].centres().len(), 2);
+}
+
+#[test]
+fn a_cut_hint_holds_two_to_six_centres() {
+    let c = [[0.0f32, 0.0, 0.5]; 7];
+    assert!(CutHint::new(1, &c[..1]).is_none(), "one centre is no cut");
+    assert!(CutHint::new(1, &c[..7]).is_none(), "more than MAX_CUT_PIECES");
+    for k in 2..=fusepose_estimator::recut::MAX_CUT_PIECES {
+        assert_eq!(CutHint::new(1, &c[..k]).map(|h| h.centres().len()), Some(k));
     }
 }

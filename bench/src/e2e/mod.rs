@@ -12,6 +12,7 @@
 //! consumer per camera (each its own scene), and one consumer subscribed to
 //! every camera and the cell; one row per camera, and the daemon's RSS.
 
+pub mod accuracy;
 pub mod processes;
 
 use std::path::PathBuf;
@@ -36,8 +37,12 @@ pub struct E2eArgs {
     pub objects_per_frame: usize,
     /// One of the drawn classes stands twice, the copies side by side and
     /// touching (a frame then holds objects-per-frame + 1 objects).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "heap")]
     pub pair: bool,
+    /// One of the drawn classes is a heap of 4–8 copies touching and lying
+    /// on each other.
+    #[arg(long)]
+    pub heap: bool,
     /// Cameras served by the one daemon, each with its own producer and consumer (1..=8).
     #[arg(long, default_value_t = 1)]
     pub cameras: usize,
@@ -92,6 +97,7 @@ impl Default for E2eArgs {
             fps: vec![24.0, 30.0, 60.0],
             objects_per_frame: 5,
             pair: false,
+            heap: false,
             cameras: 1,
             seconds: 20.0,
             deadline_ms: None,
@@ -107,6 +113,18 @@ impl Default for E2eArgs {
             estimator_extra: String::new(),
             smoke: false,
             out: "scratch/bench/e2e".into(),
+        }
+    }
+}
+
+impl E2eArgs {
+    /// The copies of one class in the producers' scenes.
+    pub fn copies(&self) -> crate::video::Copies {
+        use crate::video::Copies;
+        match (self.pair, self.heap) {
+            (_, true) => Copies::Heap,
+            (true, false) => Copies::Pair,
+            (false, false) => Copies::None,
         }
     }
 }
@@ -237,13 +255,25 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<Vec<RateResult>> {
     let (daemon, ipc, _stats) = start_daemon(&ns, &config_path, &log)?;
     let names = camera_names(args.cameras);
     let files: Vec<PathBuf> = names.iter().map(|n| ns.dir.join(format!("latencies-{n}.txt"))).collect();
+    let video_frames = if args.smoke { 4 } else { args.video_frames };
+    let objects = format!("{}{}", args.objects_per_frame, args.copies().suffix());
+    // Each consumer renders its producer's video again to score the poses against its truth.
     let mut consumers = Vec::with_capacity(names.len());
-    for (name, file) in names.iter().zip(&files) {
+    for (i, (name, file)) in names.iter().zip(&files).enumerate() {
         consumers.push(ChildProcess::spawn(
             "consumer",
-            &["e2e-consumer".into(), frames.to_string(), warmup.to_string(), file.display().to_string(), name.clone()],
+            &[
+                "e2e-consumer".into(),
+                frames.to_string(),
+                warmup.to_string(),
+                file.display().to_string(),
+                name.clone(),
+                objects.clone(),
+                (args.seed + i as u64).to_string(),
+                video_frames.to_string(),
+            ],
             &env,
-            Duration::from_secs(30),
+            Duration::from_secs(300),
         )?);
     }
     let mut all = if names.len() > 1 {
@@ -257,7 +287,6 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<Vec<RateResult>> {
     } else {
         None
     };
-    let video_frames = if args.smoke { 4 } else { args.video_frames };
     // Producers render their videos first and start together: a producer
     // still rendering must not load the machine while another one's frames count.
     let go = ns.dir.join("go");
@@ -269,7 +298,7 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<Vec<RateResult>> {
                 "e2e-producer".into(),
                 fps.to_string(),
                 frames.to_string(),
-                if args.pair { format!("{}:pair", args.objects_per_frame) } else { args.objects_per_frame.to_string() },
+                objects.clone(),
                 (args.seed + i as u64).to_string(),
                 video_frames.to_string(),
                 name.clone(),
@@ -381,14 +410,19 @@ pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
 pub fn render(r: &E2eReport) -> String {
     let a = &r.args;
     let mut s = format!(
-        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + {} camera(s), each a producer ({} objects, rendered video) + consumer\n",
+        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + {} camera(s), each a producer ({} objects{}, rendered video) + consumer\n",
         a.threads.map_or_else(|| "machine's".to_owned(), |t| t.clamp(1, 2).to_string()),
         a.refine_iterations,
         !a.no_degrade,
         a.tracking,
         a.pin,
         a.cameras,
-        a.objects_per_frame
+        a.objects_per_frame,
+        match a.copies() {
+            crate::video::Copies::None => "",
+            crate::video::Copies::Pair => ", one class twice",
+            crate::video::Copies::Heap => ", one class as a heap",
+        }
     );
     if let Some(e) = r.rates.first().map(|r| &r.estimator).filter(|e| !e.is_empty()) {
         s.push_str(&format!("estimator: {e}\n"));
@@ -449,6 +483,23 @@ pub fn render(r: &E2eReport) -> String {
             x.daemon_stale.map_or("n/a".into(), |v| v.to_string()),
             x.counts.foreign
         ));
+        if let Some(a) = &x.counts.accuracy {
+            s.push_str(&format!(
+                "{} {} fps: of {} true objects >= {:.0} % visible, {} found ({:.1} %: ADD-S < {:.0} % of the diameter), {} right by ADD(S) too ({:.1} %); wrong poses {} ({:.2} per message) of {} received\n",
+                x.camera,
+                x.fps,
+                a.visible,
+                100.0 * accuracy::MIN_VISIBLE,
+                a.found,
+                a.found_pct(),
+                100.0 * accuracy::MAX_ERROR_OF_DIAMETER,
+                a.right,
+                a.right_pct(),
+                a.wrong,
+                a.wrong_per_message(),
+                a.poses
+            ));
+        }
     }
     let mut fps_seen = Vec::new();
     for x in r.rates.iter().filter(|x| x.camera == "cam0") {

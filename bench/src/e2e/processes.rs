@@ -3,13 +3,17 @@
 //!
 //! - `e2e-daemon CONFIG LOG`: the daemon — exactly what `fuseposed --config
 //!   CONFIG` runs (`engine::resolve` + `fusepose_daemon::run`), logging to LOG;
-//! - `e2e-producer FPS FRAMES OBJECTS SEED VIDEO_FRAMES [CAMERA [GO_FILE]]`: renders a video
-//!   sequence, prints `ready`, waits for GO_FILE (when given: all producers start
-//!   together), then publishes FRAMES frames at FPS (ping-pong
-//!   over the video), capture time taken when each frame is loaned;
-//! - `e2e-consumer FRAMES WARMUP FILE [CAMERA]`: receives every pose message through
-//!   the client library (default wait strategy), writes capture → consumer
-//!   latencies (ns, one per line) to FILE and prints `result <json>`;
+//! - `e2e-producer FPS FRAMES OBJECTS[:pair|:heap] SEED VIDEO_FRAMES [CAMERA [GO_FILE]]`:
+//!   renders a video sequence, prints `ready`, waits for GO_FILE (when given:
+//!   all producers start together), then publishes FRAMES frames at FPS
+//!   (ping-pong over the video), capture time taken when each frame is loaned;
+//! - `e2e-consumer FRAMES WARMUP FILE [CAMERA [OBJECTS SEED VIDEO_FRAMES]]`:
+//!   receives every pose message through the client library (default wait
+//!   strategy), writes capture → consumer latencies (ns, one per line) to
+//!   FILE and prints `result <json>`; given the producer's video arguments,
+//!   it renders the same video before the frames come and, once they are
+//!   all in, scores each message's poses against its frame's truth
+//!   ([`super::accuracy`]);
 //! - `e2e-consumer-all SECONDS CAMERAS`: one process subscribed to every
 //!   camera (comma-separated names) and to the cell; prints `result <json>`
 //!   with the messages per camera, messages of a wrong camera, cell messages.
@@ -43,22 +47,20 @@ pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
 pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
     anyhow::ensure!(
         (5..=7).contains(&args.len()),
-        "usage: e2e-producer FPS FRAMES OBJECTS[:pair] SEED VIDEO_FRAMES [CAMERA [GO_FILE]]"
+        "usage: e2e-producer FPS FRAMES OBJECTS[:pair|:heap] SEED VIDEO_FRAMES [CAMERA [GO_FILE]]"
     );
     let camera = args.get(5).map_or(CAMERA, String::as_str);
     // With several producers: start sending only once every one has rendered its video.
     let go_file = args.get(6).map(std::path::PathBuf::from);
     let fps: f64 = args[0].parse()?;
     let frames: u64 = args[1].parse()?;
-    // `N:pair`: N classes, one of them standing twice as a touching pair.
-    let (objects, pair) = match args[2].split_once(':') {
-        Some((n, "pair")) => (n.parse::<usize>()?, true),
-        _ => (args[2].parse::<usize>()?, false),
-    };
+    // `N:pair` / `N:heap`: N classes, one of them standing twice as a
+    // touching pair, or as a heap of copies.
+    let (objects, copies) = video::Copies::parse_arg(&args[2])?;
     let seed: u64 = args[3].parse()?;
     let video_frames: usize = args[4].parse()?;
     let set = fusepose_scene::builtin::builtin_objects();
-    let video = video::render_video_with(&set, objects, pair, video_frames, 0.5, seed)?;
+    let video = video::render_video_with(&set, objects, copies, video_frames, 0.5, seed)?;
     let k = video.intrinsics;
     let layout = FrameLayout {
         width: k.width,
@@ -121,13 +123,27 @@ pub struct ConsumerCounts {
     /// Messages whose camera id is not this consumer's camera (must stay 0).
     #[serde(default)]
     pub foreign: u64,
+    /// The poses against the video's truth, when the consumer was given it.
+    #[serde(default)]
+    pub accuracy: Option<super::accuracy::AccuracyCounts>,
 }
 
 pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
-    anyhow::ensure!((3..=4).contains(&args.len()), "usage: e2e-consumer FRAMES WARMUP FILE [CAMERA]");
+    anyhow::ensure!(
+        matches!(args.len(), 3 | 4 | 7),
+        "usage: e2e-consumer FRAMES WARMUP FILE [CAMERA [OBJECTS SEED VIDEO_FRAMES]]"
+    );
     let frames: u64 = args[0].parse()?;
     let warmup: u64 = args[1].parse()?;
     let camera = args.get(3).map_or(CAMERA, String::as_str);
+    let truths = match args.get(4..7) {
+        Some([objects, seed, video_frames]) => {
+            Some(super::accuracy::Truths::render(objects, seed.parse()?, video_frames.parse()?)?)
+        }
+        _ => None,
+    };
+    let mut accuracy = super::accuracy::AccuracyCounts::default();
+    let mut received = Vec::with_capacity(if truths.is_some() { frames as usize } else { 0 });
     let own_id = fusepose_client::camera_id(camera);
     let ipc = Ipc::new(&IpcOptions::from_env().with_node_name("e2e-consumer"))?;
     let mut consumer = Consumer::open(&ipc, camera)?;
@@ -175,12 +191,22 @@ pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
             counts.estimator_failed += (msg.status & PoseStatus::ESTIMATOR_FAILED != 0) as u64;
             counts.objects += msg.objects().len() as u64;
             counts.refine_iterations += msg.objects().iter().map(|o| o.refine_iterations as u64).sum::<u64>();
+            // Scored after the run: scoring now would take the CPU from the daemon.
+            if truths.is_some() && msg.is_ok() && received.len() < received.capacity() {
+                received.push((msg.frame_sequence, msg.objects().to_vec()));
+            }
         }
         if done {
             break;
         }
     }
     counts.span_s = first.map_or(0.0, |f| (last - f) as f64 / 1e9);
+    if let Some(t) = &truths {
+        for (sequence, poses) in &received {
+            t.score(*sequence, poses, &mut accuracy);
+        }
+    }
+    counts.accuracy = truths.map(|_| accuracy);
     let text: String = latencies.iter().map(|v| format!("{v}\n")).collect();
     std::fs::write(&args[2], text)?;
     println!("result {}", serde_json::to_string(&counts)?);
