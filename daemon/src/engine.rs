@@ -467,8 +467,9 @@ pub struct PoseEngine {
     instance_classes: Vec<u16>,
     /// `estimator.recut`: the second look and the estimator of its pieces.
     recut: Option<(Recut, Box<dyn Estimator>)>,
-    /// Moving average of the second look's time per region looked at, ns.
-    recut_ns_per_region: f64,
+    /// Moving average of the second look's time per piece it estimates
+    /// (each refit round counted again), ns.
+    recut_ns_per_estimate: f64,
 }
 
 /// Safety factor on the measured post-estimate time per pose when reserving it.
@@ -691,7 +692,7 @@ impl PoseEngine {
             deadline: None,
             instance_classes: Vec::with_capacity(fusepose_estimator::seg::voting::MAX_INSTANCES + 1),
             recut,
-            recut_ns_per_region: 0.0,
+            recut_ns_per_estimate: 0.0,
         })
     }
 
@@ -727,7 +728,7 @@ impl PoseEngine {
             deadline: None,
             instance_classes: Vec::new(),
             recut: None,
-            recut_ns_per_region: 0.0,
+            recut_ns_per_estimate: 0.0,
         })
     }
 
@@ -821,7 +822,7 @@ impl PoseEngine {
                     &mut self.duplicate_marks,
                 );
                 let recut_start = fusepose_client::monotonic_ns();
-                let mut recut_tried = 0;
+                let mut recut_estimates = 0;
                 if let (Some((recut, pieces)), Some(verifier), Some(ws)) =
                     (self.recut.as_mut(), self.verifier.as_mut(), self.workspace.as_mut())
                 {
@@ -832,28 +833,32 @@ impl PoseEngine {
                     let deadline = self.deadline.map(|d| d.checked_sub(reserve).unwrap_or(d));
                     pieces.set_deadline(deadline);
                     if let Some(d) = deadline {
-                        // As many regions as the time left pays for at their measured cost.
+                        // As many piece estimates as the time left pays for at their
+                        // measured cost: a region of a heap is cut into up to six
+                        // pieces, each estimated up to three times with its refits.
+                        // Too few for a region's pieces and rounds: the next frame's estimate poses them.
+                        // Before its first measurement, at this frame's own cost per instance.
                         let left = d.saturating_duration_since(std::time::Instant::now()).as_nanos() as f64;
-                        let per_region = POST_ESTIMATE_MARGIN * self.recut_ns_per_region;
-                        match if per_region > 0.0 { (left / per_region) as usize } else { 1 } {
-                            // No time for the pieces: the next frame's estimate poses them.
-                            0 => recut.defer_next_frame(),
-                            n => recut.limit_next_frame(n),
-                        }
+                        let per_estimate = POST_ESTIMATE_MARGIN
+                            * match self.recut_ns_per_estimate {
+                                0.0 => (t2 - t1) as f64 / instances.max(1) as f64,
+                                measured => measured,
+                            };
+                        recut.budget_next_frame((left / per_estimate.max(1.0)) as usize);
                     }
                     let (poses, verdicts, seg) = (&mut self.poses, &mut self.verdicts, seg.as_deref_mut());
                     match recut.run(frame, ws, poses, verdicts, pieces.as_mut(), verifier, seg, seed) {
-                        Ok(stats) => recut_tried = if stats.deferred == 0 { stats.tried } else { 0 },
+                        Ok(stats) => recut_estimates = stats.estimates,
                         Err(e) => {
                             tracing::debug!(error = %e, "second look at a region failed; the region keeps its pose")
                         }
                     }
                 }
                 let recut_ns = fusepose_client::monotonic_ns() - recut_start;
-                // Its cost per region estimated (not deferred) sizes the next frames' second look.
-                if recut_tried > 0 {
-                    let ns = recut_ns as f64 / recut_tried as f64;
-                    self.recut_ns_per_region = match self.recut_ns_per_region {
+                // Its cost per piece estimated sizes the next frames' second look.
+                if recut_estimates > 0 {
+                    let ns = recut_ns as f64 / recut_estimates as f64;
+                    self.recut_ns_per_estimate = match self.recut_ns_per_estimate {
                         0.0 => ns,
                         old => old + POST_ESTIMATE_GAIN * (ns - old),
                     };

@@ -255,9 +255,13 @@ pub struct RecutStats {
     pub kept: usize,
     /// Cuts carried from the last frame ([`Recut::hints`]) that held again.
     pub carried: usize,
-    /// Regions cut but not estimated ([`Recut::defer_next_frame`]): their
-    /// cuts are carried to the next frame untried.
+    /// Regions cut but not estimated ([`Recut::defer_next_frame`], or a
+    /// budget too small for the first: [`Recut::budget_next_frame`]):
+    /// their cuts are carried to the next frame untried.
     pub deferred: usize,
+    /// Pieces estimated, counting each refit round again (what the second
+    /// look's time goes by).
+    pub estimates: usize,
     /// Of the regions cut, those cut along the segmenter's centre votes.
     pub by_votes: usize,
     /// Cuts estimated and refused, by the first term that refused them:
@@ -273,6 +277,7 @@ impl std::ops::AddAssign for RecutStats {
         self.kept += o.kept;
         self.carried += o.carried;
         self.deferred += o.deferred;
+        self.estimates += o.estimates;
         self.by_votes += o.by_votes;
         for (r, n) in self.refused.iter_mut().zip(o.refused) {
             *r += n;
@@ -331,8 +336,8 @@ pub struct Recut {
     /// Per candidate: its pieces' centres (k-means), camera frame.
     centres: Vec<[[f32; 3]; MAX_CUT_PIECES]>,
     marks: Vec<bool>,
-    /// [`Recut::limit_next_frame`]'s cap, for the next frame only.
-    frame_limit: Option<usize>,
+    /// [`Recut::budget_next_frame`]'s piece estimates, for the next frame only.
+    frame_budget: Option<usize>,
     /// [`Recut::defer_next_frame`], for the next frame only.
     defer: Option<()>,
     /// Cuts refused in this frame's [`Recut::run`], by [`Refusal`].
@@ -382,7 +387,7 @@ impl Recut {
             order: Vec::with_capacity(SAMPLES),
             centres: Vec::with_capacity(regions),
             marks: Vec::with_capacity(4 * ws_config.max_instances),
-            frame_limit: None,
+            frame_budget: None,
             defer: None,
             refusals: [0; 4],
             refused: Vec::with_capacity(ws_config.max_instances),
@@ -418,10 +423,16 @@ impl Recut {
         self.votes = Some(votes);
     }
 
-    /// Looks at no more than `regions` regions in the next [`Recut::run`]
-    /// only: what the frame's time left pays for (the daemon).
-    pub fn limit_next_frame(&mut self, regions: usize) {
-        self.frame_limit = Some(regions);
+    /// In the next [`Recut::run`] only: estimate at most `estimates` pieces
+    /// in all, each refit round counting its pieces again: what the frame's
+    /// time left pays for (the daemon, at the measured cost per piece). A
+    /// region is looked at in this frame only when its pieces and their
+    /// refit rounds fit (lowest coverage first); when the first region's do
+    /// not, the cuts are deferred to the next frame's estimate
+    /// ([`Recut::defer_next_frame`]). A region of a heap cut into six and
+    /// refitted twice is 18 estimates, a pair's 6.
+    pub fn budget_next_frame(&mut self, estimates: usize) {
+        self.frame_budget = Some(estimates);
     }
 
     /// Looks again at the regions of `ws` whose pose in `poses` covers less
@@ -481,22 +492,29 @@ impl Recut {
         let votes = own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter);
         stats.by_votes = self.cut(frame, ws, poses.as_slice(), votes);
         self.votes = own;
-        stats.tried = self.centres.len();
-        if stats.tried == 0 {
+        let budget = self.frame_budget.take();
+        let rounds = if self.config.refit { REFIT_ROUNDS } else { 0 };
+        let first = self.candidates.first().map_or(0, |c| c.pieces as usize * (1 + rounds));
+        if self.centres.is_empty() {
             return Ok(stats);
         }
-        if self.defer.take().is_some() {
+        if self.defer.take().is_some() || budget.is_some_and(|b| b < first) {
             // No time for the pieces now: the next frame's own estimate
             // poses them, and `check_hinted` judges the cut there.
+            stats.tried = self.centres.len();
             stats.deferred = self.defer_cuts(poses.as_slice());
             return Ok(stats);
         }
+        let cost = self.fit_budget(frame.width(), budget.unwrap_or(usize::MAX) / (1 + rounds));
+        stats.tried = self.centres.len();
         self.estimate_pieces(frame, estimator, seed, |this, view, _| this.verify(view, verifier, segmenter))?;
-        for _ in 0..if self.config.refit { REFIT_ROUNDS } else { 0 } {
+        stats.estimates = cost;
+        for _ in 0..rounds {
             if self.refit(frame) == 0 {
                 break;
             }
             self.estimate_pieces(frame, estimator, seed, |this, view, _| this.verify(view, verifier, segmenter))?;
+            stats.estimates += cost;
         }
         stats.kept =
             self.with_pieces(frame, |this, view, ids| this.apply(frame, view, verifier, ids, ws, poses, verdicts));
@@ -750,6 +768,38 @@ impl Recut {
         deferred
     }
 
+    /// Keeps the candidates (lowest coverage first) whose pieces fit in
+    /// `budget` (pieces estimated once each), at least the first, and takes
+    /// the others' pieces off the piece plane; returns the pieces kept.
+    fn fit_budget(&mut self, width: usize, budget: usize) -> usize {
+        let mut total = 0;
+        let mut keep = 0;
+        for c in &self.candidates {
+            if keep > 0 && total + c.pieces as usize > budget {
+                break;
+            }
+            total += c.pieces as usize;
+            keep += 1;
+        }
+        for j in keep..self.candidates.len() {
+            let c = self.candidates[j];
+            let pieces = c.base + 1..=c.base + c.pieces as u16;
+            let [u0, v0, u1, v1] = self.written[j].map(|x| x as usize);
+            for v in v0..=v1 {
+                for id in &mut self.ids[v * width + u0..=v * width + u1] {
+                    if pieces.contains(id) {
+                        *id = 0;
+                    }
+                }
+            }
+            self.classes[c.base as usize + 1..=c.base as usize + c.pieces as usize].fill(0);
+        }
+        self.candidates.truncate(keep);
+        self.centres.truncate(keep);
+        self.written.truncate(keep);
+        total
+    }
+
     /// The regions to look at, lowest coverage first.
     fn choose(
         &mut self,
@@ -773,7 +823,7 @@ impl Recut {
             }
         }
         self.candidates.sort_unstable_by(|a, b| a.coverage.total_cmp(&b.coverage));
-        self.candidates.truncate(self.config.max_regions.min(self.frame_limit.take().unwrap_or(usize::MAX)));
+        self.candidates.truncate(self.config.max_regions);
     }
 
     /// Writes the candidates' pieces into the instance plane, from up to

@@ -589,3 +589,50 @@ fn a_cut_hint_holds_two_to_six_centres() {
         assert_eq!(CutHint::new(1, &c[..k]).map(|h| h.centres().len()), Some(k));
     }
 }
+
+#[test]
+fn a_budget_of_piece_estimates_bounds_the_second_look() {
+    let l = l_block();
+    let frame = row_of_three(&l);
+    let config = RecutConfig { max_pieces: 4, ..RecutConfig::DEFAULT };
+    let run = |budget: Option<usize>| {
+        let mut stream = Stream::with(config);
+        if let Some(b) = budget {
+            stream.recut.budget_next_frame(b);
+        }
+        let (_, stats) = stream.frame(&frame, 7);
+        (stats, stream.recut.hints().iter().map(|h| h.centres().len()).collect::<Vec<_>>())
+    };
+    // Fewer than the region's three pieces and their two refit rounds:
+    // nothing estimated, the cut deferred to the next frame with its three centres.
+    let (stats, hints) = run(Some(8));
+    assert_eq!((stats.tried, stats.deferred, stats.estimates, stats.kept), (1, 1, 0, 0));
+    assert_eq!(hints, [3]);
+    // Unbounded: the pieces and each refit round that moves pixels, at most two.
+    let (free, _) = run(None);
+    assert!(free.estimates >= 3 && free.estimates <= 9 && free.estimates % 3 == 0, "{free:?}");
+    assert_eq!(free.deferred, 0);
+    assert_eq!(run(Some(9)).0, free, "a budget that pays for every round changes nothing");
+    // Without refit the pieces alone are the cost.
+    let mut plain = Stream::with(RecutConfig { refit: false, ..config });
+    plain.recut.budget_next_frame(3);
+    let (_, stats) = plain.frame(&frame, 7);
+    assert_eq!((stats.deferred, stats.estimates), (0, 3));
+}
+
+#[test]
+fn a_budget_takes_the_regions_whose_pieces_fit_lowest_coverage_first() {
+    // Two pairs far apart: two regions to cut in two.
+    let l = l_block();
+    let at = |x: f64| (1, &l, pose(10.0, [x, 0.0, 0.8]));
+    let frame = painted(render(&[at(-0.24), at(-0.16), at(0.16), at(0.24)]));
+    let config = RecutConfig { refit: false, ..RecutConfig::DEFAULT };
+    let mut both = Stream::with(config);
+    let (prepared, stats) = both.frame(&frame, 7);
+    assert_eq!((prepared, stats.tried, stats.estimates), (2, 2, 4), "both pairs cut and estimated");
+    let mut one = Stream::with(config);
+    one.recut.budget_next_frame(3);
+    let (_, stats) = one.frame(&frame, 7);
+    assert_eq!((stats.tried, stats.estimates), (1, 2), "the second pair's pieces do not fit");
+    assert_eq!(one.poses.len(), stats.kept + 2, "the other region keeps its one pose");
+}
