@@ -707,9 +707,7 @@ impl Recut {
                 let centre = |a: usize| {
                     let i = poses.as_slice()[a].instance_id as usize;
                     let inst = ws.instances[i];
-                    let points = &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)];
-                    let n = points.len().max(1) as f32;
-                    points.iter().fold([0.0f32; 3], |c, p| [c[0] + p[0] / n, c[1] + p[1] / n, c[2] + p[2] / n])
+                    mean(ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)].iter().copied())
                 };
                 let mut centres = [[0.0f32; 3]; MAX_CUT_PIECES];
                 for (c, &a) in centres.iter_mut().zip(&taken[..count]) {
@@ -722,13 +720,7 @@ impl Recut {
                 }
                 held += 1;
             } else if self.refused.len() < self.refused.capacity() {
-                let mut mid = [0.0f32; 3];
-                for &(_, a) in found.iter() {
-                    let t = poses.as_slice()[a].translation;
-                    for (m, x) in mid.iter_mut().zip([t.x, t.y, t.z]) {
-                        *m += x as f32 / n as f32;
-                    }
-                }
+                let mid = mean(found.iter().map(|&(_, a)| poses.as_slice()[a].translation.map(|x| x as f32).into()));
                 let class_id = poses.as_slice()[found[0].1].class_id;
                 self.refused.push(Refused { class_id, midpoint: mid, frames: REFUSED_FRAMES });
             }
@@ -746,12 +738,7 @@ impl Recut {
         let mut deferred = 0;
         for (j, c) in self.candidates.iter().enumerate() {
             let (centres, class_id) = (&self.centres[j][..c.pieces as usize], poses[c.pose].class_id);
-            let mut mid = [0.0f32; 3];
-            for centre in centres {
-                for (m, x) in mid.iter_mut().zip(centre) {
-                    *m += x / centres.len() as f32;
-                }
-            }
+            let mid = mean(centres.iter().copied());
             // The same place: within the object's smallest side.
             let reach = self.sides.get(class_id as usize - 1).copied().unwrap_or(0.0);
             let near = |r: &Refused| {
@@ -1140,6 +1127,12 @@ impl Recut {
         }
         kept
     }
+}
+
+/// The mean of `points` (the origin for none).
+fn mean(points: impl ExactSizeIterator<Item = [f32; 3]>) -> [f32; 3] {
+    let n = points.len().max(1) as f32;
+    points.fold([0.0; 3], |c, p| [c[0] + p[0] / n, c[1] + p[1] / n, c[2] + p[2] / n])
 }
 
 /// The terms that tell two copies from one object cut in two.
