@@ -4,7 +4,10 @@
 //! - the poses it publishes without a deadline, each against its nearest
 //!   true copy with its verification terms: the poses that lie between
 //!   copies yet pass verification;
-//! - its frames against a 40.5 ms deadline: how many end late.
+//! - its frames against a 40.5 ms deadline: how many end late;
+//! - how many of its poses a pose of the previous frames confirms (the
+//!   daemon's `CONFIRMED` flag), found and stray ones apart, also on pairs
+//!   and one-of-each videos and with the segmenter (session 32).
 //!
 //! `cargo test --release -p fusepose-bench --test heap_diagnostics -- --ignored --nocapture`
 
@@ -24,6 +27,22 @@ fn heap_and_engine() -> (fusepose_scene::ObjectSet, Video, PoseEngine) {
     let config = EstimatorConfig { weights, masks: MaskSource::Labels, ..EstimatorConfig::default() };
     let engine = PoseEngine::new(&resolve(&config).unwrap()).unwrap();
     (set, v, engine)
+}
+
+/// (ADD-S / diameter, translation error m) of `p` to the nearest true object of its class.
+fn nearest_copy(
+    set: &fusepose_scene::ObjectSet,
+    metrics: &[ObjectMetric],
+    truth: &[(u16, fusepose_scene::Pose)],
+    p: &fusepose_estimator::ObjectPose,
+) -> Option<(f64, f64)> {
+    let est = Isometry3::from_parts(Translation3::from(p.translation), p.rotation);
+    let (m, d) = (&metrics[p.class_id as usize - 1], set.by_class(p.class_id)?.diameter);
+    truth
+        .iter()
+        .filter(|(c, _)| *c == p.class_id)
+        .map(|(_, t)| (m.add_s(&est, t) / d, (t.translation.vector - est.translation.vector).norm()))
+        .min_by(|a, b| a.0.total_cmp(&b.0))
 }
 
 #[test]
@@ -55,15 +74,7 @@ fn heap_poses_against_their_nearest_copy() {
         engine.set_deadline(None);
         engine.run(&f.view(v.intrinsics), i as u64, &mut times).unwrap();
         for (p, ver) in engine.poses().iter().zip(engine.verdicts()) {
-            let est = Isometry3::from_parts(Translation3::from(p.translation), p.rotation);
-            let (m, d) = (&metrics[p.class_id as usize - 1], set.by_class(p.class_id).unwrap().diameter);
-            let nearest = f
-                .truth
-                .iter()
-                .filter(|(c, _)| *c == p.class_id)
-                .map(|(_, t)| (m.add_s(&est, t) / d, (t.translation.vector - est.translation.vector).norm()))
-                .min_by(|a, b| a.0.total_cmp(&b.0));
-            if let Some((e, dt)) = nearest {
+            if let Some((e, dt)) = nearest_copy(&set, &metrics, &f.truth, p) {
                 rows.push((e, dt, ver.fit, ver.depth_residual_m));
             }
         }
@@ -85,5 +96,75 @@ fn heap_poses_against_their_nearest_copy() {
             of.iter().filter(|r| r.2 < 0.5).count(),
             1e3 * mean(|r| r.3 as f64),
         );
+    }
+}
+
+/// Per published pose: (class id, translation in the camera of each later
+/// frame it is carried into, stray?) for the confirmation diagnostic.
+struct Published {
+    class_id: u16,
+    translation: nalgebra::Vector3<f64>,
+    stray: bool,
+}
+
+#[test]
+#[ignore]
+fn poses_confirmed_by_earlier_frames() {
+    let set = fusepose_scene::builtin::builtin_objects();
+    let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+    let metrics: Vec<ObjectMetric> = set.objects.iter().map(|o| ObjectMetric::for_model(o).unwrap()).collect();
+    let cases = [
+        ("heap of six, class labels", 1, Copies::Heap, MaskSource::Labels),
+        ("heap of six, segmenter", 1, Copies::Heap, MaskSource::Net),
+        ("two pairs, class labels", 2, Copies::Pair, MaskSource::Labels),
+        ("five objects, segmenter", 5, Copies::None, MaskSource::Net),
+    ];
+    for (name, objects, copies, masks) in cases {
+        let config = EstimatorConfig { weights: weights.clone(), masks, ..EstimatorConfig::default() };
+        let v = video::render_video_with(&set, objects, copies, 48, 0.5, 7).unwrap();
+        let mut engine = PoseEngine::new(&resolve(&config).unwrap()).unwrap();
+        // Each frame's poses in that frame's camera.
+        let mut frames: Vec<Vec<Published>> = Vec::new();
+        for (i, f) in v.frames.iter().enumerate() {
+            let mut times: StageTimes = Default::default();
+            engine.set_deadline(None);
+            engine.run(&f.view(v.intrinsics), i as u64, &mut times).unwrap();
+            frames.push(
+                engine
+                    .poses()
+                    .iter()
+                    .map(|p| {
+                        let near = nearest_copy(&set, &metrics, &f.truth, p).map_or(f64::INFINITY, |n| n.0);
+                        Published { class_id: p.class_id, translation: p.translation, stray: near >= 0.1 }
+                    })
+                    .collect(),
+            );
+        }
+        // The scene is static and the camera orbits: earlier poses are carried
+        // into a frame's camera by the truth's own motion (as a fixed camera
+        // would see them).
+        for (gate, back) in [(0.01, 1), (0.01, 3), (0.02, 1)] {
+            let mut table = [[0usize; 2]; 2]; // [stray][confirmed]
+            for i in back..frames.len() {
+                for p in &frames[i] {
+                    let confirmed = (1..=back).any(|k| {
+                        let motion = v.frames[i].truth[0].1 * v.frames[i - k].truth[0].1.inverse();
+                        frames[i - k].iter().any(|q| {
+                            let t = motion.transform_point(&q.translation.into()).coords;
+                            q.class_id == p.class_id && (t - p.translation).norm() < gate
+                        })
+                    });
+                    table[p.stray as usize][confirmed as usize] += 1;
+                }
+            }
+            println!(
+                "{name}, a pose of the last {back} frame(s) within {:.0} mm: found {} of {} confirmed, stray {} of {}",
+                gate * 1e3,
+                table[0][1],
+                table[0][0] + table[0][1],
+                table[1][1],
+                table[1][0] + table[1][1]
+            );
+        }
     }
 }

@@ -7,6 +7,10 @@
 //! object with no estimate of its class (instance not found, dropped, or the
 //! frame refused) is a failure (infinite error). With several instances of a
 //! class in a frame, estimates are matched greedily by translation distance.
+//! Ghosts are estimates matched to no object; stray poses are those at ADD-S
+//! ≥ 0.1 × diameter from every true object of their class (ghosts, and poses
+//! matched to a copy they miss, e.g. between two copies in a heap): a grasp
+//! at nothing either way.
 //! Timing covers `Workspace::prepare` + `Estimator::estimate` per frame (not
 //! image decoding); time per object is the frame time divided by the
 //! instances estimated in it.
@@ -259,6 +263,10 @@ pub struct Args {
     /// daemon's `estimator.recut_refit`.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.refit, action = clap::ArgAction::Set)]
     pub recut_refit: bool,
+    /// `--recut`: a piece is a copy only when its pose's verification fit is
+    /// at least this (0 = any passing pose).
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit)]
+    pub recut_min_piece_fit: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -497,6 +505,13 @@ struct Runner {
     /// Estimates matched to no ground-truth object (ghost objects: a false
     /// instance of the masks, or a second instance of an object).
     unmatched: usize,
+    /// Published poses at ADD-S ≥ 0.1 d from every true object of their class
+    /// (a grasp at nothing), and how many of them the matching paired with an
+    /// object (a pose between two copies) rather than counting as a ghost.
+    stray: usize,
+    stray_matched: usize,
+    /// Each class's diameter (metres), index class − 1.
+    diameters: Vec<f64>,
     /// Regions joined into another of their class (`--join-parts`).
     joined: usize,
     /// Instances added by cutting regions (`--split-regions`).
@@ -611,6 +626,7 @@ impl Runner {
                     max_pieces: args.recut_pieces,
                     poses: args.recut_poses,
                     refit: args.recut_refit,
+                    min_piece_fit: args.recut_min_piece_fit,
                     ..fusepose_estimator::recut::RecutConfig::DEFAULT
                 };
                 if recut_config.is_on() && args.verify != "off" {
@@ -658,6 +674,9 @@ impl Runner {
             object_ms: Vec::new(),
             refused: BTreeMap::new(),
             unmatched: 0,
+            stray: 0,
+            stray_matched: 0,
+            diameters: objects.objects.iter().map(|o| o.diameter).collect(),
             joined: 0,
             split: 0,
             instance_counts: instances::InstanceCounts::default(),
@@ -770,6 +789,12 @@ impl Runner {
         }
         let pairs = match_estimates(&frame.gt, self.poses.as_slice());
         self.unmatched += self.poses.len() - pairs.iter().filter(|(_, e)| e.is_some()).count();
+        for p in self.poses.as_slice() {
+            if nearest_error(&frame.gt, p, metrics, &self.diameters) >= STRAY_ERROR {
+                self.stray += 1;
+                self.stray_matched += pairs.iter().any(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, p))) as usize;
+            }
+        }
         for &(gt, est) in &pairs {
             let errors = est.zip(metrics.get(gt.class_id as usize - 1)).map(|(e, m)| m.errors(&pose_of(e), &gt.pose));
             self.table.record(gt.class_id, errors);
@@ -854,6 +879,9 @@ impl Runner {
             fusepose_estimator::poses::remove_marked(&mut verdicts, &marks);
             fusepose_estimator::poses::remove_marked(&mut passed, &marks);
         }
+        // For the trace: the poses before the second look (a pose not among them is a cut's piece).
+        let before: Vec<[f64; 3]> =
+            if trace { self.poses.as_slice().iter().map(|p| p.translation.into()).collect() } else { Vec::new() };
         if let Some((recut, net)) = self.recut.as_mut() {
             // The second look needs a verdict per pose; a pose without a region has none to cut.
             let mut all: Vec<fusepose_estimator::verify::Verification> = verdicts
@@ -909,8 +937,10 @@ impl Runner {
                     let total: usize = inside.values().sum();
                     let copies = inside.values().filter(|&&n| n * 10 >= total.max(1)).count();
                     let sprob = v.region_probability;
+                    let near = nearest_error(&frame.gt, p, metrics, &self.diameters);
+                    let piece = !before.contains(&p.translation.into()) as u8;
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
+                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -1016,6 +1046,12 @@ impl Runner {
             self.unmatched,
             self.unmatched as f64 / self.frame_ms.len().max(1) as f64
         );
+        println!(
+            "stray poses (ADD-S >= {STRAY_ERROR} d from every object of their class): {} ({:.2} per frame), {} of them matched to an object",
+            self.stray,
+            self.stray as f64 / self.frame_ms.len().max(1) as f64,
+            self.stray_matched
+        );
         let buckets: Vec<String> = self
             .by_visibility
             .rows()
@@ -1083,6 +1119,8 @@ impl Runner {
             o.insert("frames".into(), self.frame_ms.len().into());
             o.insert("frames_refused".into(), self.refused.values().sum::<usize>().into());
             o.insert("unmatched_estimates".into(), self.unmatched.into());
+            o.insert("stray_poses".into(), self.stray.into());
+            o.insert("stray_poses_matched".into(), self.stray_matched.into());
             o.insert("joined_parts".into(), self.joined.into());
             o.insert("split_regions".into(), self.split.into());
             o.insert("duplicates_dropped".into(), self.duplicates.into());
@@ -1114,6 +1152,21 @@ impl Runner {
             "by_visibility": by_visibility,
         })
     }
+}
+
+/// A pose this far from every true object of its class (ADD-S / diameter) is
+/// counted as stray: the "found" threshold of the pose-estimation literature.
+const STRAY_ERROR: f64 = 0.1;
+
+/// ADD-S / diameter from `p` to the nearest true object of its class
+/// (infinite when the frame holds none).
+fn nearest_error(gt: &[GtObject], p: &ObjectPose, metrics: &[ObjectMetric], diameters: &[f64]) -> f64 {
+    let k = p.class_id as usize - 1;
+    let (Some(m), Some(&d)) = (metrics.get(k), diameters.get(k)) else { return f64::INFINITY };
+    gt.iter()
+        .filter(|g| g.class_id == p.class_id)
+        .map(|g| m.add_s(&pose_of(p), &g.pose) / d)
+        .fold(f64::INFINITY, f64::min)
 }
 
 /// Pairs each ground-truth object with an estimate of its class (greedy, by
@@ -1217,6 +1270,23 @@ mod tests {
         assert_eq!(m[0].1.map(|p| p.translation.x), Some(0.11));
         assert_eq!(m[1].1.map(|p| p.translation.x), Some(-0.09));
         assert!(m[2].1.is_none(), "class 2 has no estimate: a miss");
+    }
+
+    #[test]
+    fn a_pose_is_stray_beyond_a_tenth_of_the_diameter_from_every_copy() {
+        // A cross of four points 0.1 m across; two copies 0.2 m apart.
+        let points =
+            [(0.05, 0.0), (-0.05, 0.0), (0.0, 0.05), (0.0, -0.05)].map(|(x, y)| nalgebra::Point3::new(x, y, 0.0));
+        let metrics = [ObjectMetric::new(&points, false).unwrap()];
+        let gt = [-0.1, 0.1].map(|x| GtObject { class_id: 1, pose: Pose::translation(x, 0.0, 0.5), visible: None });
+        let near = |x: f64| nearest_error(&gt, &at(1, x), &metrics, &[0.1]);
+        // 9 mm from the second copy (every point 9 mm off): found.
+        assert!((near(0.109) - 0.09).abs() < 1e-9, "{}", near(0.109));
+        assert!(near(0.109) < STRAY_ERROR && near(-0.091) < STRAY_ERROR);
+        // 11 mm off, or midway between the copies: stray.
+        assert!(near(0.111) >= STRAY_ERROR && near(0.0) >= STRAY_ERROR, "{} {}", near(0.111), near(0.0));
+        // A class the frame does not hold.
+        assert_eq!(nearest_error(&gt, &at(2, 0.1), &metrics, &[0.1, 0.1]), f64::INFINITY);
     }
 
     #[test]

@@ -54,11 +54,19 @@ impl PoseFlags {
     /// The object's mask came from the frame's own instance-label plane
     /// (label format 3), not from class labels or the built-in segmenter.
     pub const FROM_INSTANCE_LABELS: u16 = 1 << 1;
+    /// A pose of the same class lay within `estimator.confirm_within_m`
+    /// (default 1 cm) of this one in the camera's previous processed frame,
+    /// in the camera frame: the pose was seen twice in a row.
+    pub const CONFIRMED: u16 = 1 << 2;
 }
 
 impl WireObjectPose {
     pub fn is_verified(&self) -> bool {
         self.flags & PoseFlags::VERIFIED != 0
+    }
+
+    pub fn is_confirmed(&self) -> bool {
+        self.flags & PoseFlags::CONFIRMED != 0
     }
 }
 
@@ -315,8 +323,9 @@ mod tests {
         assert_eq!(offset_of!(WireObjectPose, depth_residual_m), 84);
         assert_eq!(offset_of!(PoseMessage, objects), 96);
         let p = WireObjectPose { flags: PoseFlags::VERIFIED | PoseFlags::FROM_INSTANCE_LABELS, ..Default::default() };
-        assert!(p.is_verified());
+        assert!(p.is_verified() && !p.is_confirmed());
         assert!(!WireObjectPose::default().is_verified());
+        assert!(WireObjectPose { flags: PoseFlags::CONFIRMED, ..Default::default() }.is_confirmed());
     }
 
     #[test]

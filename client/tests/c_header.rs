@@ -94,6 +94,7 @@ fn constants() -> Vec<(&'static str, u64)> {
         ("FUSEPOSE_STATUS_ESTIMATOR_FAILED", PoseStatus::ESTIMATOR_FAILED as u64),
         ("FUSEPOSE_POSE_VERIFIED", PoseFlags::VERIFIED as u64),
         ("FUSEPOSE_POSE_FROM_INSTANCE_LABELS", PoseFlags::FROM_INSTANCE_LABELS as u64),
+        ("FUSEPOSE_POSE_CONFIRMED", PoseFlags::CONFIRMED as u64),
         ("FUSEPOSE_MAX_CELL_OBJECTS", MAX_CELL_OBJECTS as u64),
         ("FUSEPOSE_MAX_CELL_VIEWS", MAX_CELL_VIEWS as u64),
         ("FUSEPOSE_CELL_VERIFIED", CellFlags::VERIFIED as u64),

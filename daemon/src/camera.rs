@@ -15,6 +15,7 @@ use iceoryx2::port::subscriber::Subscriber;
 use iceoryx2::prelude::*;
 use iceoryx2::sample::Sample;
 
+use crate::confirm::Confirmations;
 use crate::counters::{FrameCounters, SequenceEvent, SequenceTracker};
 use crate::engine::{EngineFailure, PoseEngine, StageTimes};
 use crate::frame_view::to_frame_view;
@@ -92,6 +93,8 @@ pub struct CameraState {
     pub busy_ns: u64,
     /// Tracking mode: instance ids that stay with their object from frame to frame.
     stable_ids: Option<StableIds>,
+    /// Marks poses the previous frame saw too ([`PoseFlags::CONFIRMED`]).
+    confirmations: Confirmations,
 }
 
 /// A pose on the wire, with its verification when the daemon verifies
@@ -170,7 +173,13 @@ impl CameraState {
             last_message: PoseMessage::default(),
             busy_ns: 0,
             stable_ids: None,
+            confirmations: Confirmations::new(crate::config::DEFAULT_CONFIRM_WITHIN_M, 1),
         }
+    }
+
+    /// How near (metres; 0 = never) a pose of how many of the last frames confirms one.
+    pub fn set_confirmation(&mut self, within_m: f64, frames: u32) {
+        self.confirmations = Confirmations::new(within_m, frames);
     }
 
     /// Publishes instance ids that stay with their object (tracking mode); `None`: per-frame indices.
@@ -357,6 +366,7 @@ impl CameraState {
                 if let Some(ids) = self.stable_ids.as_mut() {
                     ids.assign(&mut msg.objects[..finite]);
                 }
+                self.confirmations.mark(&mut msg.objects[..finite]);
                 msg.object_count = finite as u16;
                 msg.status = PoseStatus::OK;
                 if self.engine.degraded() {
@@ -387,6 +397,7 @@ impl CameraState {
             }
             // Estimate, segmentation or a panic: the frame was fine, the engine failed.
             Err(e) => {
+                self.confirmations.forget();
                 self.counters.estimator_failures += 1;
                 msg.status = PoseStatus::ESTIMATOR_FAILED;
                 if let Some(suppressed) = self.estimator_log.allow(monotonic_ns()) {
@@ -398,6 +409,7 @@ impl CameraState {
     }
 
     fn reject(&mut self, msg: &mut PoseMessage, reason: InvalidReason, detail: &dyn std::fmt::Display) {
+        self.confirmations.forget();
         self.counters.count_invalid(reason);
         msg.status = PoseStatus::INVALID_FRAME;
         msg.invalid_reason = reason as u32;

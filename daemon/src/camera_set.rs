@@ -141,6 +141,7 @@ impl Camera {
         let ports = Rc::new(CameraPorts::open(ipc, &settings.name)?);
         let mut state = CameraState::new(&settings.name, engine, settings.deadline_ns, now_ns);
         state.set_stable_ids(stable_ids);
+        state.set_confirmation(settings.estimator.confirm_within_m, settings.estimator.confirm_frames);
         Ok(Self {
             settings: settings.clone(),
             ports,
@@ -182,6 +183,10 @@ impl Camera {
         }
         if let Some(ids) = update.stable_ids {
             self.state.set_stable_ids(ids);
+        }
+        let confirm = |s: &CameraSettings| (s.estimator.confirm_within_m, s.estimator.confirm_frames);
+        if confirm(s) != confirm(&self.settings) {
+            self.state.set_confirmation(s.estimator.confirm_within_m, s.estimator.confirm_frames);
         }
         if s.deadline_ns != self.settings.deadline_ns {
             changed.push("deadline");

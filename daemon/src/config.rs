@@ -38,6 +38,10 @@ pub enum MaskSource {
 /// (docs/BENCHMARKS.md, "Session 20").
 pub const DEFAULT_REGION_CERTAINTY_QUANTILE: f32 = fusepose_estimator::seg::file::DEFAULT_CERTAINTY_QUANTILE;
 
+/// Default of `estimator.confirm_within_m` (metres): a network pose of a
+/// still object moves by a few millimetres between frames.
+pub const DEFAULT_CONFIRM_WITHIN_M: f64 = 0.01;
+
 /// Most cameras one daemon serves.
 pub const MAX_CAMERAS: usize = 16;
 
@@ -283,6 +287,19 @@ pub struct EstimatorConfig {
     /// posed bounding box holds it and estimate the pieces again
     /// (`fusepose_estimator::recut::RecutConfig::refit`).
     pub recut_refit: bool,
+    /// `recut`: a piece counts as a copy only when its pose's verification
+    /// fit is at least this (0 = any passing pose;
+    /// `fusepose_estimator::recut::RecutConfig::min_piece_fit`).
+    pub recut_min_piece_fit: f32,
+    /// A published pose gets `PoseFlags::CONFIRMED` when a pose of its class
+    /// lay within this distance of it in the camera's previous processed
+    /// frame (metres, camera frame; 0 = never set) (`crate::confirm`).
+    pub confirm_within_m: f64,
+    /// `confirm_within_m`: in how many of the camera's last processed frames
+    /// (1 = the previous one; up to 24): more bridges frames where the
+    /// daemon shed the object to keep its deadline, but confirms more poses
+    /// that lie between copies.
+    pub confirm_frames: u32,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`
     /// or `cells` (`fusepose_estimator::seg::Boundary`).
@@ -415,6 +432,9 @@ impl Default for EstimatorConfig {
             recut_pieces: fusepose_estimator::recut::RecutConfig::DEFAULT.max_pieces,
             recut_poses: fusepose_estimator::recut::RecutConfig::DEFAULT.poses.to_string(),
             recut_refit: fusepose_estimator::recut::RecutConfig::DEFAULT.refit,
+            recut_min_piece_fit: fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit,
+            confirm_within_m: DEFAULT_CONFIRM_WITHIN_M,
+            confirm_frames: 1,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             seg_depth_regions: "on".to_owned(),
@@ -656,6 +676,12 @@ impl DaemonConfig {
                 "must be \"votes\", \"votes-only\" or \"points\"",
             ));
         }
+        if !(0.0..=1.0).contains(&e.confirm_within_m) {
+            return Err(invalid("estimator.confirm_within_m", e.confirm_within_m, "must be in 0..=1 metres (0 = off)"));
+        }
+        if !(1..=crate::confirm::MAX_CONFIRM_FRAMES).contains(&e.confirm_frames) {
+            return Err(invalid("estimator.confirm_frames", e.confirm_frames, "must be in 1..=24 frames"));
+        }
         if !(2..=fusepose_estimator::recut::MAX_CUT_PIECES).contains(&e.recut_pieces) {
             return Err(invalid("estimator.recut_pieces", e.recut_pieces, "must be in 2..=6"));
         }
@@ -693,6 +719,7 @@ impl DaemonConfig {
             ("estimator.verify_min_region_probability", e.verify_min_region_probability),
             ("estimator.class_alternates", e.class_alternates),
             ("estimator.recut", e.recut),
+            ("estimator.recut_min_piece_fit", e.recut_min_piece_fit),
         ] {
             if !(0.0..=1.0).contains(&v) {
                 return Err(invalid(key, v, "must be in 0..=1"));
@@ -871,6 +898,16 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\njoin_parts = -1.0\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.join_parts"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\njoin_parts = 0\n").unwrap().estimator.join_parts, 0.0);
+        let err = DaemonConfig::parse("[estimator]\nconfirm_within_m = 10.0\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.confirm_within_m") && err.contains("metres"), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\nconfirm_within_m = 0\n").unwrap().estimator.confirm_within_m, 0.0);
+        let err = DaemonConfig::parse("[estimator]\nconfirm_frames = 0\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.confirm_frames") && err.contains("1..=24"), "{err}");
+        assert_eq!(DaemonConfig::parse("[estimator]\nconfirm_frames = 3\n").unwrap().estimator.confirm_frames, 3);
+        let err = DaemonConfig::parse("[estimator]\nrecut_min_piece_fit = 1.2\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.recut_min_piece_fit") && err.contains("0..=1"), "{err}");
+        let c = DaemonConfig::parse("[estimator]\nrecut_min_piece_fit = 0.5\n").unwrap();
+        assert_eq!(c.estimator.recut_min_piece_fit, 0.5);
         let err = DaemonConfig::parse("[estimator]\nrecut = 1.5\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.recut"), "{err}");
         assert_eq!(DaemonConfig::parse("[estimator]\nrecut = 0\n").unwrap().estimator.recut, 0.0);

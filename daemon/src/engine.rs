@@ -216,6 +216,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             max_pieces: config.recut_pieces,
             poses,
             refit: config.recut_refit,
+            min_piece_fit: config.recut_min_piece_fit,
             ..RecutConfig::DEFAULT
         };
         if let Some((objects, _, _)) = spec.verify.as_ref().filter(|_| recut.is_on()) {

@@ -15,6 +15,7 @@ pub mod camera_set;
 pub mod cell;
 pub mod cell_output;
 pub mod config;
+pub mod confirm;
 pub mod counters;
 pub mod engine;
 pub mod event_loop;

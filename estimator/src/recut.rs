@@ -168,6 +168,11 @@ pub struct RecutConfig {
     /// ([`Recut::refit`]): a cut between point clusters misses the contact
     /// between copies whose mass lies off their centre (an L, a mug).
     pub refit: bool,
+    /// A piece counts as a copy only when its pose's verification fit is at
+    /// least this (besides passing): a piece that still holds parts of two
+    /// copies gets a pose between them that passes on its neighbours'
+    /// surfaces with a low fit. 0 = any passing pose.
+    pub min_piece_fit: f32,
 }
 
 /// Which poses' regions the second look takes ([`RecutConfig::poses`]).
@@ -224,6 +229,7 @@ impl RecutConfig {
         max_pieces: MAX_CUT_PIECES,
         poses: RecutPoses::Any,
         refit: true,
+        min_piece_fit: 0.0,
     };
 
     pub fn is_on(&self) -> bool {
@@ -684,7 +690,8 @@ impl Recut {
             };
             let mut taken = [0usize; MAX_CUT_PIECES];
             let mut count = 0;
-            for &(_, a) in found.iter().filter(|&&(_, a)| verdicts[a].passed) {
+            let min_fit = self.config.min_piece_fit;
+            for &(_, a) in found.iter().filter(|&&(_, a)| verdicts[a].passed && verdicts[a].fit >= min_fit) {
                 let (pa, Some(ma)) = pose_mask(a) else { continue };
                 let copy = taken[..count].iter().all(|&t| {
                     let (pt, Some(mt)) = pose_mask(t) else { return false };
@@ -1002,7 +1009,8 @@ impl Recut {
         let mut passed = [(0.0f32, 0usize, 0usize); MAX_CUT_PIECES];
         let mut n = 0;
         for k in 0..c.pieces as usize {
-            if let Some(a) = self.piece_pose(j, k).filter(|&a| self.verdicts[a].passed) {
+            let copy = |a: &usize| self.verdicts[*a].passed && self.verdicts[*a].fit >= self.config.min_piece_fit;
+            if let Some(a) = self.piece_pose(j, k).filter(copy) {
                 passed[n] = (self.verdicts[a].fit, k, a);
                 n += 1;
             }

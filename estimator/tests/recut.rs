@@ -472,6 +472,28 @@ fn three_touching_copies_are_cut_into_three_when_the_pieces_allow() {
 }
 
 #[test]
+fn a_piece_whose_pose_fits_below_the_floor_is_no_copy() {
+    let l = l_block();
+    let frame = row_of_three(&l);
+    let config = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, ..RecutConfig::DEFAULT };
+    let all = second_look(&frame.view(), config);
+    assert_eq!(all.poses.len(), 3);
+    let mut fits: Vec<f32> = all.verdicts.iter().map(|v| v.fit).collect();
+    fits.sort_by(f32::total_cmp);
+    assert!(fits[0] < 0.99, "the test needs a piece fitting below 1: {fits:?}");
+    // At the lowest piece's fit every piece still counts.
+    let at = second_look(&frame.view(), RecutConfig { min_piece_fit: fits[0], ..config });
+    assert_eq!(at.poses.len(), 3, "a floor equal to the lowest fit keeps every piece");
+    // Just above it, that piece is not a copy: two blocks keep their poses.
+    let above = second_look(&frame.view(), RecutConfig { min_piece_fit: fits[0] + 0.005, ..config });
+    assert_eq!((above.stats.kept, above.poses.len()), (1, 2), "the lowest-fit piece is no copy");
+    assert!(above.verdicts.iter().all(|v| v.fit > fits[0]), "{:?}", above.verdicts);
+    // Above every piece: no copy at all, the cut is refused and the region keeps one pose.
+    let none = second_look(&frame.view(), RecutConfig { min_piece_fit: 1.01, ..config });
+    assert_eq!((none.stats.kept, none.poses.len()), (0, 1), "no piece counts: the cut is refused");
+}
+
+#[test]
 fn the_region_of_a_failed_pose_is_looked_at_unless_only_passed_poses_are() {
     let l = l_block();
     let frame = row_of_three(&l);

@@ -74,6 +74,24 @@ fn layout() -> FrameLayout {
 
 /// Sends `target`'s frame with a class-label plane (every labelled pixel
 /// `CLASS`) instead of `layout`'s labels; returns its sequence number.
+/// Sends `target` with its instance plane (instances 1 and 2, both [`CLASS`]),
+/// written in place through the producer API; returns its sequence number.
+fn send_instance_frame(producer: &mut Producer, target: &RenderTarget) -> anyhow::Result<u64> {
+    let k = intrinsics();
+    let mut frame = producer.loan()?;
+    frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
+    let planes = frame.planes_mut();
+    planes.color.copy_from_slice(target.rgb());
+    let DepthMut::U16(depth) = planes.depth else { panic!("u16 depth layout") };
+    depth.copy_from_slice(target.depth_u16());
+    let Some(LabelsMut::Instances { ids: id_plane, classes }) = planes.labels else {
+        panic!("an instance layout gives an instance plane")
+    };
+    id_plane.copy_from_slice(target.labels());
+    classes.copy_from_slice(&[0, CLASS, CLASS]);
+    Ok(frame.send()?)
+}
+
 fn send_class_frame(producer: &mut Producer, layout: FrameLayout, target: &RenderTarget) -> anyhow::Result<u64> {
     let k = intrinsics();
     let class_layout = FrameLayout { labels: Some(LabelFormat::U16), ..layout };
@@ -101,7 +119,7 @@ fn send_class_frame(producer: &mut Producer, layout: FrameLayout, target: &Rende
 fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> {
     let env = TestEnv::new("instances")?;
     let config = env.write_daemon_config(
-        "kind = \"icp\"\nmax_instances = 8\nmin_pixels = 50\nverify = \"flag\"\nverify_min_fit = 0.999\nverify_agreeing_mask_agreement = 2.0",
+        "kind = \"icp\"\nmax_instances = 8\nmin_pixels = 50\nverify = \"flag\"\nverify_min_fit = 0.999\nverify_agreeing_mask_agreement = 2.0\nconfirm_within_m = 0.05",
     )?;
     let _daemon = start_daemon(&env, &config)?;
 
@@ -124,19 +142,7 @@ fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> 
     let mut producer = Producer::create(&ipc, "cam0", layout)?;
     let mut consumer = Consumer::open(&ipc, "cam0")?;
 
-    // The frame with its instance plane, written in place through the producer API.
-    let mut frame = producer.loan()?;
-    frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
-    let planes = frame.planes_mut();
-    planes.color.copy_from_slice(target.rgb());
-    let DepthMut::U16(depth) = planes.depth else { panic!("u16 depth layout") };
-    depth.copy_from_slice(target.depth_u16());
-    let Some(LabelsMut::Instances { ids: id_plane, classes }) = planes.labels else {
-        panic!("an instance layout gives an instance plane")
-    };
-    id_plane.copy_from_slice(ids);
-    classes.copy_from_slice(&[0, CLASS, CLASS]);
-    let sequence = frame.send()?;
+    let sequence = send_instance_frame(&mut producer, &target)?;
     let first = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
     assert!(first.is_ok(), "status {:#x}, reason {:?}", first.status, first.invalid());
     let poses = first.objects();
@@ -160,6 +166,14 @@ fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> 
         assert_eq!(o.mask_pixels as usize, pixels(nearest as u16 + 1), "the instance's whole mask");
     }
     assert_eq!(matched, [true, true], "each box has its own pose");
+    assert!(poses.iter().all(|o| !o.is_confirmed()), "a first frame confirms nothing");
+
+    // The same frame again: each pose lies where one of its class lay in the
+    // previous frame (within the test's 5 cm: ICP samples other points each frame).
+    let sequence = send_instance_frame(&mut producer, &target)?;
+    let again = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
+    assert_eq!(again.object_count, 2, "{:?}", again.objects());
+    assert!(again.objects().iter().all(WireObjectPose::is_confirmed), "{:?}", again.objects());
 
     // The same frame with class labels: the touching pair is one region.
     let sequence = send_class_frame(&mut producer, layout, &target)?;
@@ -172,8 +186,8 @@ fn touching_identical_objects_get_one_pose_per_instance() -> anyhow::Result<()> 
     // `verify = "flag"` with a fit few poses reach (0.999; the slack for poses that
     // agree with their mask is off): failing poses are
     // published without VERIFIED, and the stats count each one.
-    let unverified = [&first, &msg].iter().flat_map(|m| m.objects()).filter(|o| !o.is_verified()).count();
-    assert!(unverified >= 1, "a fit of 0.999 fails some of the 3 poses");
+    let unverified = [&first, &again, &msg].iter().flat_map(|m| m.objects()).filter(|o| !o.is_verified()).count();
+    assert!(unverified >= 1, "a fit of 0.999 fails some of the 5 poses");
     let stats = query_stats(&env, Duration::from_secs(5))?;
     assert_eq!(stats.poses_failed_verification, unverified as u64, "{stats:?}");
     assert_eq!((stats.objects_shed, stats.frames_degraded), (0, 0), "{stats:?}");
@@ -239,10 +253,11 @@ fn touching_copies_with_class_labels_are_cut_into_two() -> anyhow::Result<()> {
     Ok(())
 }
 
-/// Only the two defined flag bits are used; the scores are NaN exactly when
+/// Only the three defined flag bits are used; the scores are NaN exactly when
 /// the pose was not verified, and a verified pose has a passing result.
 fn check_verification_fields(o: &WireObjectPose) {
-    assert_eq!(o.flags & !(PoseFlags::VERIFIED | PoseFlags::FROM_INSTANCE_LABELS), 0, "flags {:#x}", o.flags);
+    let defined = PoseFlags::VERIFIED | PoseFlags::FROM_INSTANCE_LABELS | PoseFlags::CONFIRMED;
+    assert_eq!(o.flags & !defined, 0, "flags {:#x}", o.flags);
     if o.fit_score.is_nan() {
         assert!(o.depth_residual_m.is_nan() && !o.is_verified(), "{o:?}");
     } else {

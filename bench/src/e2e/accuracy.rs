@@ -37,6 +37,19 @@ pub struct AccuracyCounts {
     /// Received poses that find no true object: a ghost, a pose between
     /// copies, or one far off.
     pub wrong: u64,
+    /// Received poses with `PoseFlags::CONFIRMED` (a pose of their class lay
+    /// near them in the previous frame), and how many of those are wrong.
+    #[serde(default)]
+    pub confirmed: u64,
+    #[serde(default)]
+    pub wrong_confirmed: u64,
+    /// Received poses near no true object of their class (ADD-S at or above
+    /// the bound for each: `fusepose eval`'s stray poses; a second pose of
+    /// a found object is wrong but not stray), and of them the confirmed ones.
+    #[serde(default)]
+    pub stray: u64,
+    #[serde(default)]
+    pub stray_confirmed: u64,
 }
 
 impl AccuracyCounts {
@@ -97,6 +110,10 @@ impl Truths {
                 }
             }
         }
+        let mut near = vec![false; poses.len()];
+        pairs.iter().for_each(|&(_, i, _, _)| near[i] = true);
+        counts.stray += near.iter().filter(|&&n| !n).count() as u64;
+        counts.stray_confirmed += poses.iter().zip(&near).filter(|(p, n)| p.is_confirmed() && !**n).count() as u64;
         pairs.sort_by(|a, b| a.0.total_cmp(&b.0));
         let (mut pose_taken, mut truth_taken) = (vec![false; poses.len()], vec![false; frame.truth.len()]);
         for (_, i, j, right) in pairs {
@@ -108,6 +125,9 @@ impl Truths {
             }
         }
         counts.wrong += pose_taken.iter().filter(|&&t| !t).count() as u64;
+        counts.confirmed += poses.iter().filter(|p| p.is_confirmed()).count() as u64;
+        counts.wrong_confirmed +=
+            poses.iter().zip(&pose_taken).filter(|(p, t)| p.is_confirmed() && !**t).count() as u64;
     }
 }
 
@@ -151,15 +171,26 @@ mod tests {
             right: visible,
             poses: exact.len() as u64,
             wrong: 0,
+            confirmed: 0,
+            wrong_confirmed: 0,
+            stray: 0,
+            stray_confirmed: 0,
         };
         assert_eq!(counts, all);
         // The first object 20 cm off, and the second posed twice: both extra poses are wrong.
+        // The first and the extra one carry CONFIRMED, as does one right pose.
         let mut off = exact.clone();
         off[0].translation_m[0] += 0.2;
         off.push(exact[1]);
+        for i in [0, 2, off.len() - 1] {
+            off[i].flags |= fusepose_client::PoseFlags::CONFIRMED;
+        }
         let mut counts = AccuracyCounts::default();
         truths.score(0, &off, &mut counts);
         assert_eq!(counts.wrong, 2, "{counts:?}");
+        assert_eq!((counts.confirmed, counts.wrong_confirmed), (3, 2), "{counts:?}");
+        // The second pose of a found object is wrong, not stray: it lies on an object.
+        assert_eq!((counts.stray, counts.stray_confirmed), (1, 1), "{counts:?}");
         assert_eq!(counts.found, visible - (frame.visible[0] >= MIN_VISIBLE) as u64);
         // A box turned half about its own z axis: the same shape (ADD-S finds
         // it), the print the other way (ADD of an asymmetric object does not).

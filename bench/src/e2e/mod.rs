@@ -485,7 +485,7 @@ pub fn render(r: &E2eReport) -> String {
         ));
         if let Some(a) = &x.counts.accuracy {
             s.push_str(&format!(
-                "{} {} fps: of {} true objects >= {:.0} % visible, {} found ({:.1} %: ADD-S < {:.0} % of the diameter), {} right by ADD(S) too ({:.1} %); wrong poses {} ({:.2} per message) of {} received\n",
+                "{} {} fps: of {} true objects >= {:.0} % visible, {} found ({:.1} %: ADD-S < {:.0} % of the diameter), {} right by ADD(S) too ({:.1} %); wrong poses {} ({:.2} per message) of {} received, {} of them stray (near no object of their class); confirmed poses {}, {} of them wrong, {} stray\n",
                 x.camera,
                 x.fps,
                 a.visible,
@@ -497,7 +497,11 @@ pub fn render(r: &E2eReport) -> String {
                 a.right_pct(),
                 a.wrong,
                 a.wrong_per_message(),
-                a.poses
+                a.poses,
+                a.stray,
+                a.confirmed,
+                a.wrong_confirmed,
+                a.stray_confirmed
             ));
         }
     }

@@ -63,8 +63,8 @@ pub fn run_each(
         println!("\nby colour cast (issue 19 robustness column)");
     }
     println!(
-        "{:<6}  {:<16}  {:>15}  {:>15}  {:>15}  {:>15}",
-        "cast", "run", "ADD-S AUC", "ADD(S) AUC", "ADD-S<2cm", "ghosts/frame"
+        "{:<6}  {:<16}  {:>15}  {:>15}  {:>15}  {:>15}  {:>15}",
+        "cast", "run", "ADD-S AUC", "ADD(S) AUC", "ADD-S<2cm", "ghosts/frame", "stray/frame"
     );
     for (cast, run, all) in &rows {
         println!("{}", summary_row(*cast, run, all));
@@ -87,13 +87,14 @@ fn summary_row(cast: Cast, run: &str, all: &[serde_json::Value]) -> String {
     };
     let num = |o: &serde_json::Value, k: &str| o.get(k).and_then(serde_json::Value::as_f64).unwrap_or(f64::NAN);
     format!(
-        "{:<6}  {:<16}  {:>15}  {:>15}  {:>15}  {:>15}",
+        "{:<6}  {:<16}  {:>15}  {:>15}  {:>15}  {:>15}  {:>15}",
         cast.name(),
         run,
         column(&|o| num(o, "add_s_auc")),
         column(&|o| num(o, "add_s_auc_symmetric_aware")),
         column(&|o| num(o, "add_s_lt_2cm")),
         column(&|o| num(o, "unmatched_estimates") / num(o, "frames").max(1.0)),
+        column(&|o| num(o, "stray_poses") / num(o, "frames").max(1.0)),
     )
 }
 
@@ -103,23 +104,25 @@ mod tests {
 
     fn overall(add_s: f64, add: f64, ghosts: u64) -> serde_json::Value {
         serde_json::json!({"add_s_auc": add_s, "add_s_auc_symmetric_aware": add,
-            "add_s_lt_2cm": 95.0, "unmatched_estimates": ghosts, "frames": 60})
+            "add_s_lt_2cm": 95.0, "unmatched_estimates": ghosts, "stray_poses": 2 * ghosts, "frames": 60})
     }
 
     #[test]
-    fn one_seed_shows_the_overall_numbers_and_ghosts_per_frame() {
+    fn one_seed_shows_the_overall_numbers_and_ghosts_and_strays_per_frame() {
         let row = summary_row(Cast::Cool, "net", &[overall(93.456, 80.0, 12)]);
         assert!(row.starts_with("cool    net"), "{row}");
-        assert!(row.contains("93.46") && row.contains("80.00") && row.ends_with("0.20"), "{row}");
+        assert!(row.contains("93.46") && row.contains("80.00") && row.contains(" 0.20 "), "{row}");
+        assert!(row.ends_with("0.40"), "{row}");
         assert!(!row.contains('±'), "{row}");
     }
 
     #[test]
     fn several_seeds_show_the_mean_and_the_sample_standard_deviation() {
         let row = summary_row(Cast::None, "net", &[overall(80.0, 70.0, 6), overall(82.0, 74.0, 18)]);
-        // Means 81 and 72; sample sd of (80, 82) = √2, of (70, 74) = 2√2; ghosts 0.1 and 0.3 per frame.
+        // Means 81 and 72; sample sd of (80, 82) = √2, of (70, 74) = 2√2; ghosts 0.1 and 0.3 per
+        // frame, strays twice that.
         assert!(row.contains("81.00 ± 1.41"), "{row}");
         assert!(row.contains("72.00 ± 2.83"), "{row}");
-        assert!(row.ends_with("0.20 ± 0.14"), "{row}");
+        assert!(row.contains("0.20 ± 0.14") && row.ends_with("0.40 ± 0.28"), "{row}");
     }
 }

@@ -236,15 +236,16 @@ fn num(v: &serde_json::Value, path: &[&str]) -> f64 {
 }
 
 /// The acceptance report: per split, overall and per-object AUCs for true
-/// and segmenter masks, ghosts (estimates matching no object) per frame and
-/// what verification dropped, then the config lines.
+/// and segmenter masks, ghosts (estimates matching no object) and stray poses
+/// (at ADD-S ≥ 0.1 d from every object of their class) per frame and what
+/// verification dropped, then the config lines.
 fn report_text(args: &Args, work: &Work, results: &[serde_json::Value]) -> String {
     let mut s = format!(
         "# Acceptance report: {}\n\nHeld-out splits rendered from the same meshes (seeds {ACCEPT_SEED}.., 30 frames \
          each, {} depth sensor; no training or validation scene), in {}. ADD-S / ADD(S) AUC (0-10 cm), %. \
          Verification against depth as the daemon does it (failed poses dropped, counting as misses).\n\n\
-         | split | masks | ADD-S AUC | ADD(S) AUC | ADD-S < 2 cm | objects | ghosts / frame | real poses dropped by verification |\n\
-         |---|---|---|---|---|---|---|---|\n",
+         | split | masks | ADD-S AUC | ADD(S) AUC | ADD-S < 2 cm | objects | ghosts / frame | stray poses / frame | real poses dropped by verification |\n\
+         |---|---|---|---|---|---|---|---|---|\n",
         args.out.display(),
         args.depth_sensor,
         work.dir.display()
@@ -255,12 +256,13 @@ fn report_text(args: &Args, work: &Work, results: &[serde_json::Value]) -> Strin
             let r = &results[key];
             let frames = num(r, &["overall", "frames"]).max(1.0);
             s += &format!(
-                "| {split} | {label} | {:.1} | {:.1} | {:.1} % | {} | {:.2} | {} |\n",
+                "| {split} | {label} | {:.1} | {:.1} | {:.1} % | {} | {:.2} | {:.2} | {} |\n",
                 num(r, &["overall", "add_s_auc"]),
                 num(r, &["overall", "add_s_auc_symmetric_aware"]),
                 num(r, &["overall", "add_s_lt_2cm"]),
                 num(r, &["overall", "count"]),
                 num(r, &["overall", "unmatched_estimates"]) / frames,
+                num(r, &["overall", "stray_poses"]) / frames,
                 num(r, &["overall", "verification", "failed_real"])
             );
             if let Some(objects) = r["per_object"].as_object() {

@@ -31,6 +31,7 @@ STATUS_ESTIMATOR_FAILED = 16
 # WireObjectPose.flags bits.
 POSE_VERIFIED = 1
 POSE_FROM_INSTANCE_LABELS = 2
+POSE_CONFIRMED = 4  # a pose of its class lay within estimator.confirm_within_m in the previous frame
 
 # Rejection reason codes (PoseMessage.invalid_reason, and the index into
 # StatsSnapshot.invalid_by_reason).
