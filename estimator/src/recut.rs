@@ -236,6 +236,12 @@ impl RecutConfig {
         self.max_coverage > 0.0 && self.max_regions > 0
     }
 
+    /// Whether a piece whose pose got verdict `v` may be a copy: it passed,
+    /// with at least [`RecutConfig::min_piece_fit`].
+    fn piece_may_be_copy(&self, v: &Verification) -> bool {
+        v.passed && v.fit >= self.min_piece_fit
+    }
+
     /// [`RecutConfig::max_pieces`] within 2 ..= [`MAX_CUT_PIECES`].
     fn pieces(&self) -> usize {
         self.max_pieces.clamp(2, MAX_CUT_PIECES)
@@ -690,8 +696,7 @@ impl Recut {
             };
             let mut taken = [0usize; MAX_CUT_PIECES];
             let mut count = 0;
-            let min_fit = self.config.min_piece_fit;
-            for &(_, a) in found.iter().filter(|&&(_, a)| verdicts[a].passed && verdicts[a].fit >= min_fit) {
+            for &(_, a) in found.iter().filter(|&&(_, a)| self.config.piece_may_be_copy(&verdicts[a])) {
                 let (pa, Some(ma)) = pose_mask(a) else { continue };
                 let copy = taken[..count].iter().all(|&t| {
                     let (pt, Some(mt)) = pose_mask(t) else { return false };
@@ -1009,8 +1014,7 @@ impl Recut {
         let mut passed = [(0.0f32, 0usize, 0usize); MAX_CUT_PIECES];
         let mut n = 0;
         for k in 0..c.pieces as usize {
-            let copy = |a: &usize| self.verdicts[*a].passed && self.verdicts[*a].fit >= self.config.min_piece_fit;
-            if let Some(a) = self.piece_pose(j, k).filter(copy) {
+            if let Some(a) = self.piece_pose(j, k).filter(|&a| self.config.piece_may_be_copy(&self.verdicts[a])) {
                 passed[n] = (self.verdicts[a].fit, k, a);
                 n += 1;
             }

@@ -437,6 +437,9 @@ fn a_deferred_cut_the_next_frame_refuses_is_not_deferred_again_for_a_while() {
     assert_eq!(stream.frame(&single, 40).1.deferred, 1, "after REFUSED_FRAMES it may be tried again");
 }
 
+/// Cuts into up to four pieces, any pose's region looked at.
+const UP_TO_FOUR: RecutConfig = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, ..RecutConfig::DEFAULT };
+
 /// Three L blocks in a row, 5 mm apart, painted alike: one class-1 region.
 /// (Touching, the cut between them misses their contacts: k-means places
 /// it midway between the blocks' centroids, which lie off their boxes'
@@ -450,7 +453,7 @@ fn row_of_three(l: &BoxObject) -> SyntheticFrame {
 fn three_touching_copies_are_cut_into_three_when_the_pieces_allow() {
     let l = l_block();
     let frame = row_of_three(&l);
-    let config = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, ..RecutConfig::DEFAULT };
+    let config = UP_TO_FOUR;
     let out = second_look(&frame.view(), config);
     assert_eq!(out.before, 1, "one region, one pose before the second look");
     assert_eq!((out.stats.tried, out.stats.kept), (1, 1), "the region is cut and the cut kept");
@@ -475,7 +478,7 @@ fn three_touching_copies_are_cut_into_three_when_the_pieces_allow() {
 fn a_piece_whose_pose_fits_below_the_floor_is_no_copy() {
     let l = l_block();
     let frame = row_of_three(&l);
-    let config = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, ..RecutConfig::DEFAULT };
+    let config = UP_TO_FOUR;
     let all = second_look(&frame.view(), config);
     assert_eq!(all.poses.len(), 3);
     let mut fits: Vec<f32> = all.verdicts.iter().map(|v| v.fit).collect();
@@ -528,7 +531,7 @@ fn refitting_the_cut_to_the_pieces_poses_separates_touching_l_blocks() {
     let l = l_block();
     let at = |x: f64| (1, &l, pose(10.0, [x, 0.0, 0.5]));
     let frame = painted(render(&[at(-0.08), at(0.0), at(0.08)]));
-    let config = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, refit: false, ..RecutConfig::DEFAULT };
+    let config = RecutConfig { refit: false, ..UP_TO_FOUR };
     let plain = second_look(&frame.view(), config);
     assert!(plain.poses.len() < 3, "between point clusters the cut misses the contacts: {} poses", plain.poses.len());
     let out = second_look(&frame.view(), RecutConfig { refit: true, ..config });
