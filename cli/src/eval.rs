@@ -27,6 +27,9 @@
 //! tuning split, docs/BENCHMARKS.md). `--masks gt-instances` sends the true
 //! masks as an instance plane, and every run with true instance masks in the
 //! dataset reports instance precision / recall and merged / split regions.
+//! `FUSEPOSE_MISS_TRACE=1` prints, for each true object left without a pose
+//! within 0.1 d, where its pixels went: background, a region of its class or
+//! of another, with or without a published pose.
 
 mod cast;
 mod dataset;
@@ -267,6 +270,25 @@ pub struct Args {
     /// at least this (0 = any passing pose).
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit)]
     pub recut_min_piece_fit: f32,
+    /// Second masks for failed poses: at most this many per frame get the
+    /// pixels inside their posed box (grown by `--remask-margin`) as a new
+    /// mask and are estimated again, kept when the new pose passes (0 =
+    /// off), as the daemon's `estimator.remask`.
+    #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.max_regions,
+          value_parser = clap::builder::RangedI64ValueParser::<usize>::new().range(0..=fusepose_estimator::remask::MAX_REGIONS as i64))]
+    pub remask: usize,
+    /// `--remask`: metres the posed box grows by on every side, as the
+    /// daemon's `estimator.remask_margin_m`.
+    #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.margin_m)]
+    pub remask_margin: f32,
+    /// `--remask`: estimates per second mask (each pose placing the next
+    /// box), as the daemon's `estimator.remask_rounds`.
+    #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.rounds,
+          value_parser = clap::builder::RangedI64ValueParser::<usize>::new().range(1..=fusepose_estimator::remask::MAX_ROUNDS as i64))]
+    pub remask_rounds: usize,
+    /// `--remask`: only failed poses with at least this inlier fraction.
+    #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.min_inlier_fraction)]
+    pub remask_min_inliers: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -545,6 +567,9 @@ struct Runner {
     /// pieces; regions cut again and cuts kept.
     recut: Option<(fusepose_estimator::recut::Recut, Box<dyn Estimator>)>,
     recut_stats: fusepose_estimator::recut::RecutStats,
+    /// `--remask`: second masks for failed poses, with their own network sibling.
+    remask: Option<(fusepose_estimator::remask::Remask, Box<dyn Estimator>)>,
+    remask_stats: fusepose_estimator::remask::RemaskStats,
     verify_drop: bool,
     verify_counts: [usize; 4],
     verify_ms: Vec<f64>,
@@ -602,6 +627,7 @@ impl Runner {
         // Only the segmenter's own regions are judged on its certainty.
         let region_floor = if masks == MaskSource::Net { region_floor } else { 0.0 };
         let mut recut_parts = None;
+        let mut remask_parts = None;
         let (estimator, config): (Box<dyn Estimator>, WorkspaceConfig) = match kind {
             EstimatorKind::Icp => (
                 Box::new(IcpEstimator::new(objects, IcpConfig::default())?),
@@ -634,6 +660,21 @@ impl Runner {
                     let recut =
                         fusepose_estimator::recut::Recut::new(objects, solids.clone(), ws_config, recut_config)?;
                     recut_parts = Some((recut, Box::new(net.untracked_sibling()) as Box<dyn Estimator>));
+                }
+                let remask_config = fusepose_estimator::remask::RemaskConfig {
+                    max_regions: args.remask,
+                    margin_m: args.remask_margin,
+                    rounds: args.remask_rounds,
+                    min_inlier_fraction: args.remask_min_inliers,
+                };
+                anyhow::ensure!(
+                    (0.0..=0.1).contains(&args.remask_margin) && (0.0..=1.0).contains(&args.remask_min_inliers),
+                    "--remask-margin must be in 0..=0.1 metres and --remask-min-inliers in 0..=1"
+                );
+                if remask_config.is_on() && args.verify != "off" {
+                    let ws_config = WorkspaceConfig { num_classes, ..config };
+                    let remask = fusepose_estimator::remask::Remask::new(objects, ws_config, remask_config)?;
+                    remask_parts = Some((remask, Box::new(net.untracked_sibling()) as Box<dyn Estimator>));
                 }
                 (Box::new(net), config)
             }
@@ -721,6 +762,8 @@ impl Runner {
             class_means: Vec::new(),
             recut: recut_parts,
             recut_stats: Default::default(),
+            remask: remask_parts,
+            remask_stats: Default::default(),
             verify_counts: [0; 4],
             verify_ms: Vec::new(),
             min_confidence: args.min_confidence,
@@ -795,6 +838,51 @@ impl Runner {
                 self.stray_matched += pairs.iter().any(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, p))) as usize;
             }
         }
+        if std::env::var_os("FUSEPOSE_MISS_TRACE").is_some() {
+            let ws = &self.workspace;
+            let comp_of: Vec<(u32, usize)> =
+                (0..ws.instances.len()).filter_map(|i| ws.component_id(i).map(|c| (c, i))).collect();
+            for (k, g) in frame.gt.iter().enumerate() {
+                let est = pairs.iter().find(|(t, _)| std::ptr::eq(*t, g)).and_then(|(_, e)| *e);
+                let add_s = est
+                    .zip(metrics.get(g.class_id as usize - 1))
+                    .map(|(e, m)| m.errors(&pose_of(e), &g.pose).add_s)
+                    .unwrap_or(-1.0);
+                let d = self.diameters.get(g.class_id as usize - 1).copied().unwrap_or(0.1);
+                if est.is_some() && add_s < 0.1 * d {
+                    continue;
+                }
+                // Pixels of this true instance: background / region with a posed instance (same, other class) / region unposed.
+                let (mut px, mut bg, mut same_posed, mut other_posed, mut same_unposed, mut other_unposed) =
+                    (0, 0, 0, 0, 0, 0);
+                for (&t, &c) in frame.instances.iter().zip(ws.component_ids()) {
+                    if t as usize != k + 1 {
+                        continue;
+                    }
+                    px += 1;
+                    let Some(&(_, i)) = comp_of.iter().find(|(cc, _)| *cc == c && c != 0) else {
+                        bg += 1;
+                        continue;
+                    };
+                    let class = ws.instances[i].class_id;
+                    let posed = self.poses.as_slice().iter().any(|p| p.instance_id as usize == i);
+                    match (class == g.class_id, posed) {
+                        (true, true) => same_posed += 1,
+                        (false, true) => other_posed += 1,
+                        (true, false) => same_unposed += 1,
+                        (false, false) => other_unposed += 1,
+                    }
+                }
+                eprintln!(
+                    "MTRACE frame {}/{} class {} vis {:.2} px {px} est {} add_s {add_s:.4} bg {bg} same_posed {same_posed} other_posed {other_posed} same_unposed {same_unposed} other_unposed {other_unposed}",
+                    frame.scene_id,
+                    frame.im_id,
+                    g.class_id,
+                    g.visible.unwrap_or(-1.0),
+                    est.is_some() as u8
+                );
+            }
+        }
         for &(gt, est) in &pairs {
             let errors = est.zip(metrics.get(gt.class_id as usize - 1)).map(|(e, m)| m.errors(&pose_of(e), &gt.pose));
             self.table.record(gt.class_id, errors);
@@ -845,29 +933,14 @@ impl Runner {
         let min_region_probability = verifier.config().min_region_probability;
         let trace = std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some();
         // The segmenter's certainty is read only when judged or traced.
-        let seg = seg.filter(|_| min_region_probability > 0.0 || trace);
+        let mut seg = seg.filter(|_| min_region_probability > 0.0 || trace);
         let seg_ref = seg.as_deref();
         let mut verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
             .poses
             .as_slice()
             .iter()
-            .map(|p| {
-                ws.component_id(p.instance_id as usize).map(|id| {
-                    let mask = ws.mask_ref(id, p.bbox);
-                    let mut v = verifier.verify(view, mask, p);
-                    // Only the built-in segmenter's regions carry a class probability.
-                    if let Some(seg) = seg_ref {
-                        v.judge_region_probability(
-                            seg.region_probability(mask.ids, id, p.class_id, p.bbox),
-                            min_region_probability,
-                        );
-                    }
-                    if alternates::fails_as_alternate(&ws.instances, p, v.fit) {
-                        v.passed = false;
-                    }
-                    v
-                })
-            })
+            // Only the built-in segmenter's regions carry a class probability.
+            .map(|p| fusepose_estimator::verify::verify_on_region(verifier, view, ws, seg_ref, p))
             .collect();
         let mut passed: Vec<bool> = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
         // Of a region estimated as two classes, the better-verified pose stays (as the daemon).
@@ -894,7 +967,16 @@ impl Runner {
                 })
                 .collect();
             let verifier = self.verifier.as_mut().expect("recut runs only with verification");
-            match recut.run(view, &mut self.workspace, &mut self.poses, &mut all, net.as_mut(), verifier, seg, seed) {
+            match recut.run(
+                view,
+                &mut self.workspace,
+                &mut self.poses,
+                &mut all,
+                net.as_mut(),
+                verifier,
+                seg.as_deref_mut(),
+                seed,
+            ) {
                 Ok(s) => {
                     self.recut_stats += s;
                     if s.kept > 0 {
@@ -903,6 +985,37 @@ impl Runner {
                     }
                 }
                 Err(e) => tracing::warn!("frame {}/{}: second look: {e}", frame.scene_id, frame.im_id),
+            }
+        }
+        // For the trace: the poses before the second masks (one not among them was replaced).
+        let before_remask: Vec<[f64; 3]> =
+            if trace { self.poses.as_slice().iter().map(|p| p.translation.into()).collect() } else { Vec::new() };
+        if let Some((remask, net)) = self.remask.as_mut() {
+            let mut all: Vec<fusepose_estimator::verify::Verification> =
+                verdicts.iter().map(|v| v.unwrap_or_default()).collect();
+            let verifier = self.verifier.as_mut().expect("remask runs only with verification");
+            match remask.run(
+                view,
+                &self.workspace,
+                &mut self.poses,
+                &mut all,
+                net.as_mut(),
+                verifier,
+                seg.as_deref(),
+                seed,
+            ) {
+                Ok(s) => {
+                    self.remask_stats += s;
+                    if s.kept > 0 {
+                        for (v, a) in verdicts.iter_mut().zip(&all) {
+                            if v.is_some() {
+                                *v = Some(*a);
+                            }
+                        }
+                        passed = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
+                    }
+                }
+                Err(e) => tracing::warn!("frame {}/{}: second mask: {e}", frame.scene_id, frame.im_id),
             }
         }
         let instances = &self.workspace.instances;
@@ -938,7 +1051,12 @@ impl Runner {
                     let copies = inside.values().filter(|&&n| n * 10 >= total.max(1)).count();
                     let sprob = v.region_probability;
                     let near = nearest_error(&frame.gt, p, metrics, &self.diameters);
-                    let piece = !before.contains(&p.translation.into()) as u8;
+                    // 1: a cut's piece, 2: a pose of a second mask.
+                    let piece = if !before_remask.contains(&p.translation.into()) {
+                        2
+                    } else {
+                        !before.contains(&p.translation.into()) as u8
+                    };
                     eprintln!(
                         "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
                         frame.scene_id,
@@ -1080,6 +1198,12 @@ impl Runner {
             println!(
                 "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes), {kept} kept (as two or more copies); \
                  refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap"
+            );
+        }
+        if self.remask.is_some() {
+            let fusepose_estimator::remask::RemaskStats { tried, kept, estimates } = self.remask_stats;
+            println!(
+                "failed poses given a second mask: {tried}, {kept} of them passed with it ({estimates} estimates)"
             );
         }
         if self.instance_counts.truth > 0 {

@@ -291,6 +291,18 @@ pub struct EstimatorConfig {
     /// fit is at least this (0 = any passing pose;
     /// `fusepose_estimator::recut::RecutConfig::min_piece_fit`).
     pub recut_min_piece_fit: f32,
+    /// With verification, on class-label planes: at most this many poses per
+    /// frame that failed verification get a second mask, the pixels inside
+    /// their posed bounding box grown by `remask_margin_m` (above the
+    /// support plane, outside regions whose pose passed), are estimated
+    /// again (`remask_rounds` times) and replaced when the new pose passes
+    /// on their region (`fusepose_estimator::remask`). Budgeted like the
+    /// second look. 0 = off.
+    pub remask: usize,
+    /// `remask`: metres the posed box grows by on every side.
+    pub remask_margin_m: f32,
+    /// `remask`: estimates per second mask, each pose placing the next box.
+    pub remask_rounds: usize,
     /// A published pose gets `PoseFlags::CONFIRMED` when a pose of its class
     /// lay within this distance of it in the camera's previous processed
     /// frame (metres, camera frame; 0 = never set) (`crate::confirm`).
@@ -433,6 +445,9 @@ impl Default for EstimatorConfig {
             recut_poses: fusepose_estimator::recut::RecutConfig::DEFAULT.poses.to_string(),
             recut_refit: fusepose_estimator::recut::RecutConfig::DEFAULT.refit,
             recut_min_piece_fit: fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit,
+            remask: fusepose_estimator::remask::RemaskConfig::DEFAULT.max_regions,
+            remask_margin_m: fusepose_estimator::remask::RemaskConfig::DEFAULT.margin_m,
+            remask_rounds: fusepose_estimator::remask::RemaskConfig::DEFAULT.rounds,
             confirm_within_m: DEFAULT_CONFIRM_WITHIN_M,
             confirm_frames: 1,
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
@@ -682,6 +697,15 @@ impl DaemonConfig {
         if !(1..=crate::confirm::MAX_CONFIRM_FRAMES).contains(&e.confirm_frames) {
             return Err(invalid("estimator.confirm_frames", e.confirm_frames, "must be in 1..=24 frames"));
         }
+        if e.remask > fusepose_estimator::remask::MAX_REGIONS {
+            return Err(invalid("estimator.remask", e.remask, "must be in 0..=16 poses per frame (0 = off)"));
+        }
+        if !(0.0..=0.1).contains(&e.remask_margin_m) {
+            return Err(invalid("estimator.remask_margin_m", e.remask_margin_m, "must be in 0..=0.1 metres"));
+        }
+        if !(1..=fusepose_estimator::remask::MAX_ROUNDS).contains(&e.remask_rounds) {
+            return Err(invalid("estimator.remask_rounds", e.remask_rounds, "must be in 1..=4"));
+        }
         if !(2..=fusepose_estimator::recut::MAX_CUT_PIECES).contains(&e.recut_pieces) {
             return Err(invalid("estimator.recut_pieces", e.recut_pieces, "must be in 2..=6"));
         }
@@ -882,6 +906,22 @@ mod tests {
         assert_eq!(c.estimator.masks, MaskSource::Net);
         let err = DaemonConfig::parse("[estimator]\nmasks = \"gt\"\n").unwrap_err().to_string();
         assert!(err.contains("masks") || err.contains("gt"), "{err}");
+    }
+
+    #[test]
+    fn second_mask_keys_parse_and_are_checked() {
+        let d = DaemonConfig::parse("").unwrap().estimator;
+        assert_eq!((d.remask, d.remask_margin_m, d.remask_rounds), (4, 0.01, 2), "second masks on by default");
+        for (line, key, rule) in [
+            ("remask = 17", "estimator.remask", "0..=16"),
+            ("remask_margin_m = 0.5", "estimator.remask_margin_m", "0..=0.1 metres"),
+            ("remask_margin_m = nan", "estimator.remask_margin_m", "0..=0.1 metres"),
+            ("remask_rounds = 0", "estimator.remask_rounds", "1..=4"),
+        ] {
+            let err = DaemonConfig::parse(&format!("[estimator]\n{line}\n")).unwrap_err().to_string();
+            assert!(err.starts_with(key) && err.contains(rule), "{line}: {err}");
+        }
+        assert_eq!(DaemonConfig::parse("[estimator]\nremask = 0\n").unwrap().estimator.remask, 0);
     }
 
     #[test]

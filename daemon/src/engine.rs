@@ -10,6 +10,7 @@ use fusepose_estimator::alternates;
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
 use fusepose_estimator::recut::{Recut, RecutConfig};
+use fusepose_estimator::remask::{Remask, RemaskConfig};
 use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine, SegError, SegFile, VotingMode};
 use fusepose_estimator::split::CutLimits;
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
@@ -68,6 +69,8 @@ pub struct EngineSpec {
     /// `estimator.recut`: the objects, their solids and the second look's
     /// settings (None = off).
     pub recut: Option<(Arc<ObjectSet>, Arc<Solids>, RecutConfig)>,
+    /// `estimator.remask`: the objects and the second masks' settings (None = off).
+    pub remask: Option<(Arc<ObjectSet>, RemaskConfig)>,
     /// How the segmenter's cells become frame labels (`estimator.seg_boundary`).
     pub seg_boundary: Boundary,
     /// What the segmenter does with a centre-offset head (`estimator.seg_voting`).
@@ -226,6 +229,16 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             };
             spec.recut = Some((objects.clone(), solids, recut));
         }
+        // Second masks need verification to judge the failed poses and their replacements.
+        let remask = RemaskConfig {
+            max_regions: config.remask,
+            margin_m: config.remask_margin_m,
+            rounds: config.remask_rounds,
+            ..RemaskConfig::DEFAULT
+        };
+        if let Some((objects, _, _)) = spec.verify.as_ref().filter(|_| remask.is_on()) {
+            spec.remask = Some((objects.clone(), remask));
+        }
         spec.segmenter = segmenter(config, &objects)?;
         if let (Some((_, cfg, _)), Some(seg)) = (spec.verify.as_mut(), spec.segmenter.as_deref()) {
             cfg.min_region_probability = cfg.min_region_probability.max(calibrated_floor(config, seg));
@@ -277,6 +290,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             class_alternates: 0.0,
             piece_factory: Some(icp_factory(objects.clone())),
             recut: None,
+            remask: None,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
@@ -303,6 +317,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             class_alternates: 0.0,
             piece_factory: None,
             recut: None,
+            remask: None,
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
@@ -398,6 +413,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         class_alternates: 0.0,
         piece_factory: Some(piece_factory),
         recut: None,
+        remask: None,
         seg_boundary: Boundary::default(),
         seg_voting: VotingMode::Off,
         seg_depth_regions: None,
@@ -468,9 +484,37 @@ pub struct PoseEngine {
     instance_classes: Vec<u16>,
     /// `estimator.recut`: the second look and the estimator of its pieces.
     recut: Option<(Recut, Box<dyn Estimator>)>,
-    /// Moving average of the second look's time per piece it estimates
-    /// (each refit round counted again), ns.
-    recut_ns_per_estimate: f64,
+    /// The second look's time per piece it estimates (each refit round
+    /// counted again).
+    recut_cost: EstimateCost,
+    /// `estimator.remask`: the second masks and the estimator of their poses.
+    remask: Option<(Remask, Box<dyn Estimator>)>,
+    /// The second masks' time per estimate.
+    remask_cost: EstimateCost,
+}
+
+/// Moving average of a step's time per estimate it made (ns; 0 = not yet
+/// measured), which sizes the step in the next frames.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+struct EstimateCost(f64);
+
+impl EstimateCost {
+    /// Estimates the time left before `deadline` pays for, at the measured
+    /// cost with [`POST_ESTIMATE_MARGIN`] (before a first measurement, at
+    /// `fallback_ns` each).
+    fn affordable(&self, deadline: std::time::Instant, fallback_ns: f64) -> usize {
+        let left = deadline.saturating_duration_since(std::time::Instant::now()).as_nanos() as f64;
+        let per_estimate = POST_ESTIMATE_MARGIN * if self.0 == 0.0 { fallback_ns } else { self.0 };
+        (left / per_estimate.max(1.0)) as usize
+    }
+
+    /// Adds a frame where the step took `ns` for `estimates` estimates.
+    fn record(&mut self, ns: u64, estimates: usize) {
+        if estimates > 0 {
+            let ns = ns as f64 / estimates as f64;
+            self.0 = if self.0 == 0.0 { ns } else { self.0 + POST_ESTIMATE_GAIN * (ns - self.0) };
+        }
+    }
 }
 
 /// Safety factor on the measured post-estimate time per pose when reserving it.
@@ -497,27 +541,12 @@ fn verify_poses(
 ) {
     verdicts.clear();
     let (Some(verifier), Some(ws)) = (verifier, ws) else { return };
-    let min_region_probability = verifier.config().min_region_probability;
+    // The segmenter's certainty is read only where its floor judges it.
+    let segmenter = segmenter.filter(|_| verifier.config().min_region_probability > 0.0);
     for pose in poses.as_slice() {
-        let v = match ws.component_id(pose.instance_id as usize) {
-            Some(id) => {
-                let mask = ws.mask_ref(id, pose.bbox);
-                let mut v = verifier.verify(frame, mask, pose);
-                if let Some(seg) = segmenter.filter(|_| min_region_probability > 0.0) {
-                    v.judge_region_probability(
-                        seg.region_probability(mask.ids, id, pose.class_id, pose.bbox),
-                        min_region_probability,
-                    );
-                }
-                if alternates::fails_as_alternate(&ws.instances, pose, v.fit) {
-                    v.passed = false;
-                }
-                v
-            }
-            None => {
-                Verification { depth_residual_m: f32::NAN, region_probability: f32::NAN, ..Verification::default() }
-            }
-        };
+        let v = fusepose_estimator::verify::verify_on_region(verifier, frame, ws, segmenter, pose).unwrap_or(
+            Verification { depth_residual_m: f32::NAN, region_probability: f32::NAN, ..Verification::default() },
+        );
         verdicts.push(v);
     }
     let any_alternate = ws.instances.iter().any(|i| i.alt_class_id != 0);
@@ -651,6 +680,14 @@ impl PoseEngine {
             }
             _ => None,
         };
+        let remask = match (&workspace, &spec.remask, &spec.piece_factory) {
+            (Some(_), Some((objects, config)), Some(factory)) => {
+                let remask = Remask::new(objects, workspace_config, *config)
+                    .map_err(|e| anyhow::anyhow!("estimator.remask: {e}"))?;
+                Some((remask, factory()?))
+            }
+            _ => None,
+        };
         let segmenter = match (&estimator, &spec.segmenter) {
             (Some(_), Some(file)) => Some(match spec.shared_segmenter.get() {
                 Some(shared) => shared.clone(),
@@ -693,7 +730,9 @@ impl PoseEngine {
             deadline: None,
             instance_classes: Vec::with_capacity(fusepose_estimator::seg::voting::MAX_INSTANCES + 1),
             recut,
-            recut_ns_per_estimate: 0.0,
+            recut_cost: EstimateCost::default(),
+            remask,
+            remask_cost: EstimateCost::default(),
         })
     }
 
@@ -729,7 +768,9 @@ impl PoseEngine {
             deadline: None,
             instance_classes: Vec::new(),
             recut: None,
-            recut_ns_per_estimate: 0.0,
+            recut_cost: EstimateCost::default(),
+            remask: None,
+            remask_cost: EstimateCost::default(),
         })
     }
 
@@ -822,6 +863,9 @@ impl PoseEngine {
                     frame,
                     &mut self.duplicate_marks,
                 );
+                // Before their first measurement, the second look's and the
+                // second masks' estimates cost what this frame's did.
+                let own_cost = (t2 - t1) as f64 / instances.max(1) as f64;
                 let recut_start = fusepose_client::monotonic_ns();
                 let mut recut_estimates = 0;
                 if let (Some((recut, pieces)), Some(verifier), Some(ws)) =
@@ -834,18 +878,12 @@ impl PoseEngine {
                     let deadline = self.deadline.map(|d| d.checked_sub(reserve).unwrap_or(d));
                     pieces.set_deadline(deadline);
                     if let Some(d) = deadline {
-                        // As many piece estimates as the time left pays for at their
-                        // measured cost: a region of a heap is cut into up to six
-                        // pieces, each estimated up to three times with its refits.
-                        // Too few for a region's pieces and rounds: the next frame's estimate poses them.
-                        // Before its first measurement, at this frame's own cost per instance.
-                        let left = d.saturating_duration_since(std::time::Instant::now()).as_nanos() as f64;
-                        let per_estimate = POST_ESTIMATE_MARGIN
-                            * match self.recut_ns_per_estimate {
-                                0.0 => (t2 - t1) as f64 / instances.max(1) as f64,
-                                measured => measured,
-                            };
-                        recut.budget_next_frame((left / per_estimate.max(1.0)) as usize);
+                        // As many piece estimates as the time left pays for: a
+                        // region of a heap is cut into up to six pieces, each
+                        // estimated up to three times with its refits. Too few
+                        // for a region's pieces and rounds: the next frame's
+                        // estimate poses them.
+                        recut.budget_next_frame(self.recut_cost.affordable(d, own_cost));
                     }
                     let (poses, verdicts, seg) = (&mut self.poses, &mut self.verdicts, seg.as_deref_mut());
                     match recut.run(frame, ws, poses, verdicts, pieces.as_mut(), verifier, seg, seed) {
@@ -856,14 +894,35 @@ impl PoseEngine {
                     }
                 }
                 let recut_ns = fusepose_client::monotonic_ns() - recut_start;
-                // Its cost per piece estimated sizes the next frames' second look.
-                if recut_estimates > 0 {
-                    let ns = recut_ns as f64 / recut_estimates as f64;
-                    self.recut_ns_per_estimate = match self.recut_ns_per_estimate {
-                        0.0 => ns,
-                        old => old + POST_ESTIMATE_GAIN * (ns - old),
-                    };
+                self.recut_cost.record(recut_ns, recut_estimates);
+                // Second masks for the poses still failing, in the time left
+                // after the second look, at their own measured cost; not in a
+                // frame whose own estimate gave up accuracy or objects for
+                // its deadline: its time left is the next frame's (live, five
+                // objects on a 2-core box that sheds every frame: 23 % of the
+                // objects found when they took it, 28-36 % off or with this
+                // rule; docs/BENCHMARKS.md, session 33).
+                let remask_start = fusepose_client::monotonic_ns();
+                let mut remask_estimates = 0;
+                let spare = self.deadline.is_none() || !(estimator.degraded() || estimator.shed() > 0);
+                if let (true, Some((remask, net)), Some(verifier), Some(ws)) =
+                    (spare, self.remask.as_mut(), self.verifier.as_mut(), self.workspace.as_ref())
+                {
+                    let deadline = self.deadline.map(|d| d.checked_sub(reserve).unwrap_or(d));
+                    net.set_deadline(deadline);
+                    if let Some(d) = deadline {
+                        remask.budget_next_frame(self.remask_cost.affordable(d, own_cost));
+                    }
+                    // Judged as the first poses were: the certainty floor where it is on.
+                    let seg = seg.as_deref().filter(|_| verifier.config().min_region_probability > 0.0);
+                    match remask.run(frame, ws, &mut self.poses, &mut self.verdicts, net.as_mut(), verifier, seg, seed)
+                    {
+                        Ok(stats) => remask_estimates = stats.estimates,
+                        Err(e) => tracing::debug!(error = %e, "second mask failed; the poses keep their verdicts"),
+                    }
                 }
+                let remask_ns = fusepose_client::monotonic_ns() - remask_start;
+                self.remask_cost.record(remask_ns, remask_estimates);
                 drop(seg);
                 self.failed_verification = drop_failed(&mut self.poses, &mut self.verdicts, self.verify_drop);
                 self.rejected = if self.verify_drop { self.failed_verification } else { 0 };
@@ -896,7 +955,8 @@ impl PoseEngine {
                 // planned with its own count (a decaying maximum of whole frames
                 // kept one slow frame's cost for the next hundred).
                 if estimated > 0 {
-                    let per_pose = (fusepose_client::monotonic_ns() - t2 - recut_ns) as f64 / estimated as f64;
+                    let per_pose =
+                        (fusepose_client::monotonic_ns() - t2 - recut_ns - remask_ns) as f64 / estimated as f64;
                     self.post_estimate_ns = match self.post_estimate_ns {
                         0.0 => per_pose,
                         old => old + POST_ESTIMATE_GAIN * (per_pose - old),
@@ -1032,5 +1092,38 @@ mod tests {
         assert!(resolve(&off).unwrap().recut.is_none());
         let unverified = EstimatorConfig { verify: "off".into(), ..shipped_config() };
         assert!(resolve(&unverified).unwrap().recut.is_none(), "no verdicts, nothing to decide with");
+    }
+
+    #[test]
+    fn a_steps_estimate_cost_sizes_its_next_frames() {
+        let mut cost = EstimateCost::default();
+        cost.record(5_000_000, 0);
+        assert_eq!(cost, EstimateCost(0.0), "a frame without estimates measures nothing");
+        let in_30_ms = std::time::Instant::now() + std::time::Duration::from_millis(30);
+        // Before a measurement at the fallback: 30 ms / (1.5 x 2 ms) = 10 (9 once some time passed).
+        assert!((9..=10).contains(&cost.affordable(in_30_ms, 2e6)));
+        cost.record(20_000_000, 4);
+        assert_eq!(cost, EstimateCost(5e6), "the first measurement is taken as it is");
+        assert!((3..=4).contains(&cost.affordable(in_30_ms, 2e6)), "30 ms / (1.5 x 5 ms)");
+        cost.record(15_000_000, 1);
+        assert_eq!(cost, EstimateCost(5e6 + POST_ESTIMATE_GAIN * 10e6), "then a moving average");
+        let past = std::time::Instant::now() - std::time::Duration::from_millis(1);
+        assert_eq!(cost.affordable(past, 2e6), 0, "no time left, no estimate");
+    }
+
+    #[test]
+    fn second_masks_are_on_by_default_and_need_verification() {
+        let spec = resolve(&shipped_config()).unwrap();
+        let (_, config) = spec.remask.as_ref().expect("on by default");
+        assert_eq!(*config, RemaskConfig::DEFAULT);
+        let engine = PoseEngine::new(&spec).unwrap();
+        assert!(engine.remask.is_some(), "each camera's engine has its own second masks and estimator");
+        let tuned = EstimatorConfig { remask: 2, remask_margin_m: 0.02, remask_rounds: 1, ..shipped_config() };
+        let config = resolve(&tuned).unwrap().remask.unwrap().1;
+        assert_eq!((config.max_regions, config.margin_m, config.rounds), (2, 0.02, 1));
+        let off = EstimatorConfig { remask: 0, ..shipped_config() };
+        assert!(resolve(&off).unwrap().remask.is_none());
+        let unverified = EstimatorConfig { verify: "off".into(), ..shipped_config() };
+        assert!(resolve(&unverified).unwrap().remask.is_none(), "no verdicts, nothing to replace");
     }
 }

@@ -21,6 +21,7 @@ pub mod net;
 pub mod parts;
 pub mod poses;
 pub mod recut;
+pub mod remask;
 pub mod resident;
 pub mod sampling;
 pub mod seg;

@@ -131,6 +131,13 @@ impl PoseSet {
         &self.poses
     }
 
+    /// Replaces pose `i` (nothing when there is none). No allocation.
+    pub fn replace(&mut self, i: usize, pose: ObjectPose) {
+        if let Some(p) = self.poses.get_mut(i) {
+            *p = pose;
+        }
+    }
+
     pub fn len(&self) -> usize {
         self.poses.len()
     }

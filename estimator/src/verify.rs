@@ -574,6 +574,32 @@ impl Verifier {
     }
 }
 
+/// Verifies `pose` on its region of `ws` (None: the pose has no region) with
+/// every judgment a frame's poses face: the depth terms, the segmenter's
+/// certainty over the region when `segmenter` is given (it made the regions;
+/// pass it only when its floor is on, or to read the certainty), and the stricter fit a region's alternate class needs
+/// ([`crate::alternates::fails_as_alternate`]). The daemon, `fusepose eval`
+/// and the second masks ([`crate::remask`]) judge alike through it.
+pub fn verify_on_region(
+    verifier: &mut Verifier,
+    frame: &FrameView<'_>,
+    ws: &crate::Workspace,
+    segmenter: Option<&crate::seg::SegEngine>,
+    pose: &ObjectPose,
+) -> Option<Verification> {
+    let id = ws.component_id(pose.instance_id as usize)?;
+    let mask = ws.mask_ref(id, pose.bbox);
+    let mut v = verifier.verify(frame, mask, pose);
+    if let Some(seg) = segmenter {
+        let min = verifier.config().min_region_probability;
+        v.judge_region_probability(seg.region_probability(mask.ids, id, pose.class_id, pose.bbox), min);
+    }
+    if crate::alternates::fails_as_alternate(&ws.instances, pose, v.fit) {
+        v.passed = false;
+    }
+    Some(v)
+}
+
 /// Camera-frame projection of object-frame points at `pose`: pixel (u, v)
 /// and depth z (metres); None behind or at the camera.
 fn projector(frame: &FrameView<'_>, pose: &ObjectPose) -> impl Fn(&[f32; 3]) -> Option<(f32, f32, f32)> {

@@ -253,3 +253,46 @@ fn second_look_without_allocations(recut_config: fusepose_estimator::recut::Recu
         );
     }
 }
+
+/// Second masks (`fusepose_estimator::remask`): after the warm-up frame,
+/// giving a failed pose a second mask, estimating and judging it allocates
+/// nothing.
+#[test]
+fn second_masks_do_not_allocate_after_warm_up() {
+    use fusepose_estimator::remask::{Remask, RemaskConfig};
+    use fusepose_estimator::verify::{Verifier, VerifyConfig};
+    use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
+
+    let l = l_block();
+    let objects = object_set(std::slice::from_ref(&l));
+    let config = WorkspaceConfig { num_classes: 1, support_floor_m: DEFAULT_SUPPORT_FLOOR_M, ..Default::default() };
+    let mut ws = Workspace::new(config).unwrap();
+    let mut verifier = Verifier::new(&objects, VerifyConfig::default());
+    let mut remask = Remask::new(&objects, config, RemaskConfig::DEFAULT).unwrap();
+    let mut poses = PoseSet::with_capacity(2 * config.max_instances);
+    let mut verdicts = Vec::with_capacity(2 * config.max_instances);
+    let truth = pose([0.0, 0.0, 1.0], 10.0, [0.0, 0.0, 0.5]);
+    let whole = painted(render(&[(1, &l, truth)]));
+    let (part, object_pixels) = common::left_part(painted(render(&[(1, &l, truth)])));
+    let mut estimator = common::partial(truth, object_pixels);
+    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| {
+        let view = frame.view();
+        ws.prepare(&view, seed).unwrap();
+        estimator.estimate(&view, &mut ws, &mut poses).unwrap();
+        verdicts.clear();
+        for p in poses.as_slice() {
+            let id = ws.component_id(p.instance_id as usize).unwrap();
+            verdicts.push(verifier.verify(&view, ws.mask_ref(id, p.bbox), p));
+        }
+        let mut pieces = common::partial(truth, object_pixels);
+        remask.run(&view, &ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap().kept
+    };
+    // Warm-up on a frame whose pose passes: no second mask yet.
+    assert_eq!(frame_of(&whole, 0), 0);
+    for (i, frame) in [&part, &whole, &part].into_iter().enumerate() {
+        let mut kept = 0;
+        let n = allocations_in(|| kept = frame_of(frame, 10 + i as u64));
+        assert_eq!(n, 0, "frame {i}: {n} allocations in prepare, estimate, verification and the second masks");
+        assert_eq!(kept, (i != 1) as usize, "frame {i}: failed poses replaced");
+    }
+}

@@ -15,7 +15,7 @@ use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutPoses, RecutStats, pieces_for};
 use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
-use fusepose_estimator::{CutHint, Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_estimator::{CutHint, Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
@@ -159,7 +159,7 @@ fn votes_for_one_centre_leave_the_region_whole_or_fall_back_to_the_points() {
     let looked = RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT };
     let run = |proposal| {
         let config = RecutConfig { proposal, ..looked };
-        second_look_voted(&frame.view(), config, &mut Oracle(vec![truth]), Some(Votes(|_, _| centre_cell(0.0))), None)
+        second_look_voted(&frame.view(), config, &mut oracle(vec![truth]), Some(Votes(|_, _| centre_cell(0.0))), None)
             .stats
     };
     let only = run(CutProposal::VotesOnly);
@@ -215,44 +215,12 @@ fn one_object_keeps_one_pose() {
 /// Poses every instance at the true pose nearest its points: the network's
 /// behaviour on a piece of one object (its points vote for that object's
 /// centre), without ICP's own errors on half a block.
-struct Oracle(Vec<Pose>);
-
-impl Estimator for Oracle {
-    fn name(&self) -> &str {
-        "oracle"
-    }
-
-    fn estimate(
-        &mut self,
-        _frame: &FrameView<'_>,
-        ws: &mut Workspace,
-        out: &mut PoseSet,
-    ) -> Result<(), fusepose_estimator::EstimateError> {
-        out.clear();
-        for (i, inst) in ws.instances.iter().enumerate() {
-            let points = &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)];
-            let n = points.len() as f64;
-            let c = points
-                .iter()
-                .fold(Vector3::zeros(), |a, p| a + Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64) / n);
-            let truth = self
-                .0
-                .iter()
-                .min_by(|a, b| (a.translation.vector - c).norm().total_cmp(&(b.translation.vector - c).norm()));
-            let truth = truth.unwrap();
-            out.push(ObjectPose {
-                class_id: inst.class_id,
-                instance_id: i as u16,
-                rotation: truth.rotation,
-                translation: truth.translation.vector,
-                confidence: 1.0,
-                mask_pixels: inst.pixels,
-                bbox: inst.bbox,
-                iterations: 0,
-            });
-        }
-        Ok(())
-    }
+fn oracle(truths: Vec<Pose>) -> impl Estimator {
+    common::PoseEach(move |_: &fusepose_estimator::Instance, points: &[[f32; 3]]| {
+        let c = common::centroid(points);
+        let nearest = |a: &&Pose| (a.translation.vector - c).norm();
+        *truths.iter().min_by(|a, b| nearest(a).total_cmp(&nearest(b))).unwrap()
+    })
 }
 
 #[test]
@@ -265,7 +233,7 @@ fn one_object_cut_in_two_is_kept_whole_by_each_two_copy_term() {
     let view = frame.view();
     let looked = RecutConfig { max_coverage: 1.01, refit: false, ..RecutConfig::DEFAULT };
     let all_off = RecutConfig { min_separation: 0.0, max_cross_explained: 9.0, max_overlap: 9.0, ..looked };
-    let run = |config| second_look_with(&view, config, &mut Oracle(vec![truth]));
+    let run = |config| second_look_with(&view, config, &mut oracle(vec![truth]));
     // Each term alone refuses the cut; with none of them it would stand.
     assert_eq!(run(all_off).stats.kept, 1, "without the terms, one block becomes two poses");
     for (term, config) in [
@@ -289,7 +257,7 @@ fn two_copies_posed_exactly_pass_every_term() {
     let truths = vec![pose(10.0, [-0.04, 0.0, 0.5]), pose(10.0, [0.04, 0.0, 0.5])];
     let frame = pair(&l);
     let looked = RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT };
-    let out = second_look_with(&frame.view(), looked, &mut Oracle(truths));
+    let out = second_look_with(&frame.view(), looked, &mut oracle(truths));
     assert_eq!((out.before, out.poses.len(), out.stats.kept), (1, 2, 1));
 }
 

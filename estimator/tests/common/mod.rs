@@ -8,7 +8,7 @@ use std::collections::HashMap;
 use fusepose_estimator::net::meta::{self, object_entries};
 use fusepose_estimator::seg::SegConfig;
 use fusepose_estimator::seg::file::{FORMAT, KEY_CONFIG};
-use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane};
+use fusepose_estimator::{ColorFormat, DepthPlane, Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace};
 use fusepose_scene::{Intrinsics, Mesh, ObjectModel, ObjectSet, Pose, Symmetry};
 use nalgebra::{Point3, Vector3};
 use safetensors::tensor::{Dtype, TensorView};
@@ -230,4 +230,79 @@ pub fn seg_weight_bytes(cfg: &SegConfig, set: &ObjectSet) -> Vec<u8> {
         (meta::KEY_OBJECTS.to_string(), serde_json::to_string(&object_entries(set)).unwrap()),
     ]);
     safetensors::serialize(views, Some(metadata)).unwrap()
+}
+
+/// How far the partial oracle's pose lies off the truth, metres along x.
+pub const OFF_M: f64 = 0.015;
+
+/// A test estimator that poses each prepared instance where `pose_of` says,
+/// from the instance and its distinct sampled points (camera frame).
+pub struct PoseEach<F>(pub F);
+
+impl<F> Estimator for PoseEach<F>
+where
+    F: FnMut(&fusepose_estimator::Instance, &[[f32; 3]]) -> Pose + Send,
+{
+    fn name(&self) -> &str {
+        "pose-each"
+    }
+
+    fn estimate(
+        &mut self,
+        _frame: &FrameView<'_>,
+        ws: &mut Workspace,
+        out: &mut PoseSet,
+    ) -> Result<(), fusepose_estimator::EstimateError> {
+        out.clear();
+        for (i, inst) in ws.instances.iter().enumerate() {
+            let pose = (self.0)(inst, &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)]);
+            out.push(ObjectPose {
+                class_id: inst.class_id,
+                instance_id: i as u16,
+                rotation: pose.rotation,
+                translation: pose.translation.vector,
+                confidence: 1.0,
+                mask_pixels: inst.pixels,
+                bbox: inst.bbox,
+                iterations: 0,
+            });
+        }
+        Ok(())
+    }
+}
+
+/// Mean of `points` (metres).
+pub fn centroid(points: &[[f32; 3]]) -> Vector3<f64> {
+    let n = points.len().max(1) as f64;
+    points.iter().fold(Vector3::zeros(), |a, p| a + Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64) / n)
+}
+
+/// Poses an instance at `truth` when its mask holds at least 70 % of the
+/// object's `object_pixels`, else `OFF_M` to the side: the network's
+/// behaviour on a mask that lost part of its object.
+pub fn partial(
+    truth: Pose,
+    object_pixels: u32,
+) -> PoseEach<impl FnMut(&fusepose_estimator::Instance, &[[f32; 3]]) -> Pose + Send> {
+    PoseEach(move |inst: &fusepose_estimator::Instance, _: &[[f32; 3]]| {
+        let whole = inst.pixels as f64 >= 0.7 * object_pixels as f64;
+        let off = if whole { 0.0 } else { OFF_M };
+        Pose::from_parts((truth.translation.vector + Vector3::new(off, 0.0, 0.0)).into(), truth.rotation)
+    })
+}
+
+/// Keeps class labels only left of the object's 35th percentile column:
+/// the region of an object the segmenter found in part.
+pub fn left_part(mut frame: SyntheticFrame) -> (SyntheticFrame, u32) {
+    let w = frame.intrinsics.width as usize;
+    let object_pixels = frame.labels.iter().filter(|&&l| l != 0).count() as u32;
+    let cols = || frame.labels.iter().enumerate().filter(|(_, l)| **l != 0).map(|(p, _)| p % w);
+    let (lo, hi) = (cols().min().unwrap(), cols().max().unwrap());
+    let cut = lo + (hi - lo) * 35 / 100;
+    for (p, l) in frame.labels.iter_mut().enumerate() {
+        if p % w > cut {
+            *l = 0;
+        }
+    }
+    (frame, object_pixels)
 }

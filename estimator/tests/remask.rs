@@ -1,0 +1,107 @@
+//! Second masks for failed poses (`fusepose_estimator::remask`): an object
+//! whose region holds only part of it gets a pose off by centimetres that
+//! fails verification; the pixels inside that pose's grown box make a mask
+//! that holds the object, and its estimate replaces the failed pose. A
+//! ghost region on the table gets no second mask; instance planes are the
+//! producer's and are left alone.
+
+mod common;
+
+use common::{PoseEach, l_block, left_part, object_set, painted, partial, render};
+use fusepose_estimator::remask::{Remask, RemaskConfig, RemaskStats};
+use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
+use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
+use fusepose_estimator::{Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_scene::Pose;
+use nalgebra::{Translation3, UnitQuaternion, Vector3};
+
+fn truth() -> Pose {
+    Pose::from_parts(Translation3::new(0.0, 0.0, 0.5), UnitQuaternion::from_scaled_axis(Vector3::z() * 0.2))
+}
+
+struct Outcome {
+    before: Vec<Verification>,
+    poses: PoseSet,
+    verdicts: Vec<Verification>,
+    stats: RemaskStats,
+    ws: Workspace,
+}
+
+/// Prepares, estimates and verifies `view`, then gives the failed poses a second mask.
+/// `support_floor_m`: the workspace's (the daemon's default is
+/// [`DEFAULT_SUPPORT_FLOOR_M`]).
+fn second_mask(view: &FrameView<'_>, estimator: &mut dyn Estimator, support_floor_m: f32) -> Outcome {
+    let objects = object_set(&[l_block()]);
+    let ws_config = WorkspaceConfig { num_classes: 1, support_floor_m, ..Default::default() };
+    let mut ws = Workspace::new(ws_config).unwrap();
+    let mut poses = PoseSet::with_capacity(ws_config.max_instances);
+    ws.prepare(view, 7).unwrap();
+    estimator.estimate(view, &mut ws, &mut poses).unwrap();
+    let mut verifier = Verifier::new(&objects, VerifyConfig::default());
+    let mut verdicts: Vec<Verification> = poses
+        .as_slice()
+        .iter()
+        .map(|p| verifier.verify(view, ws.mask_ref(ws.component_id(p.instance_id as usize).unwrap(), p.bbox), p))
+        .collect();
+    let before = verdicts.clone();
+    let mut remask = Remask::new(&objects, ws_config, RemaskConfig::DEFAULT).unwrap();
+    let stats = remask.run(view, &ws, &mut poses, &mut verdicts, estimator, &mut verifier, None, 7).unwrap();
+    Outcome { before, poses, verdicts, stats, ws }
+}
+
+#[test]
+fn an_object_found_in_part_is_posed_from_its_second_mask() {
+    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
+    let out = second_mask(&frame.view(), &mut partial(truth(), object_pixels), DEFAULT_SUPPORT_FLOOR_M);
+    assert_eq!(out.before.len(), 1);
+    assert!(!out.before[0].passed, "the pose from part of the object fails: {:?}", out.before[0]);
+    assert_eq!((out.stats.tried, out.stats.kept), (1, 1), "{:?} {:?}", out.stats, out.before[0]);
+    assert!(out.verdicts[0].passed, "the replacing pose passed on the segmenter's region: {:?}", out.verdicts[0]);
+    let p = out.poses.as_slice()[0];
+    let error = (p.translation - truth().translation.vector).norm();
+    assert!(error < 1e-6, "the second mask's pose is the truth, {error} m off");
+    // The pose keeps its region: the published mask is still the segmenter's.
+    let inst = out.ws.instances[p.instance_id as usize];
+    assert_eq!((p.bbox, p.mask_pixels), (inst.bbox, inst.pixels));
+}
+
+#[test]
+fn a_ghost_on_the_table_is_not_made_real_by_its_second_mask() {
+    // No object: a patch of the background plane labelled as the block. With
+    // the support floor on, the workspace drops such a region before any
+    // pose; off, it gets a pose and a second mask of table pixels, whose
+    // pose is judged on the region, as the first was.
+    let mut frame = render(&[]);
+    let w = frame.intrinsics.width as usize;
+    for (p, l) in frame.labels.iter_mut().enumerate() {
+        let (u, v) = (p % w, p / w);
+        if (40..80).contains(&u) && (150..190).contains(&v) {
+            *l = 1;
+        }
+    }
+    let out = second_mask(
+        &frame.view(),
+        &mut PoseEach(|_: &fusepose_estimator::Instance, points: &[[f32; 3]]| {
+            Pose::from_parts(common::centroid(points).into(), UnitQuaternion::identity())
+        }),
+        0.0,
+    );
+    assert_eq!(out.before.len(), 1);
+    assert!(!out.before[0].passed, "a block's pose on a flat patch fails: {:?}", out.before[0]);
+    assert_eq!((out.stats.tried, out.stats.kept), (1, 0), "{:?}", out.stats);
+    assert!(out.stats.estimates > 0, "the table pixels were estimated");
+    assert!(!out.verdicts[0].passed);
+    assert_eq!(out.verdicts[0].fit, out.before[0].fit, "the failed pose keeps its verdict");
+}
+
+#[test]
+fn an_instance_plane_is_left_to_its_producer() {
+    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
+    let ids: Vec<u16> = frame.labels.iter().map(|&l| l as u16).collect();
+    let classes = [0u16, 1];
+    let view = FrameView { labels: Some(LabelPlane::Instances { ids: &ids, classes: &classes }), ..frame.view() };
+    let out = second_mask(&view, &mut partial(truth(), object_pixels), DEFAULT_SUPPORT_FLOOR_M);
+    assert!(!out.before[0].passed);
+    assert_eq!(out.stats, RemaskStats::default(), "instance planes are not looked at");
+    assert!(!out.verdicts[0].passed);
+}
