@@ -94,8 +94,8 @@ pub struct Remask {
     candidates: Vec<usize>,
     /// Per candidate: its latest pose (the failed one, then each estimate's).
     current: Vec<Option<crate::ObjectPose>>,
-    /// Per candidate: the latest estimate's pose and verdict.
-    found: Vec<Option<(crate::ObjectPose, Verification)>>,
+    /// Per candidate: the latest estimate's pose (kept when a later round gives none).
+    found: Vec<Option<crate::ObjectPose>>,
     /// Component ids of the regions whose pose passed.
     passed_regions: Vec<u32>,
     /// [`Remask::budget_next_frame`]'s estimates, for the next frame only.
@@ -218,15 +218,13 @@ impl Remask {
                 if j >= self.candidates.len() {
                     continue;
                 }
-                let mask = self.ws.mask_ref(id, pose.bbox);
-                let v = verifier.verify(&view, mask, pose);
-                self.found[j] = Some((*pose, v));
+                self.found[j] = Some(*pose);
                 self.current[j] = Some(*pose);
             }
             self.clear_plane(w);
         }
         for (j, &i) in self.candidates.iter().enumerate() {
-            let Some((pose, _)) = self.found[j] else { continue };
+            let Some(pose) = self.found[j] else { continue };
             let old = poses.as_slice()[i];
             // Judged on the segmenter's region as the first pose was, not on
             // the second mask: drawn from a pose, it would vouch for any pose.
