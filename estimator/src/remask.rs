@@ -142,10 +142,6 @@ impl Remask {
         self.frame_budget = Some(estimates);
     }
 
-    pub fn config(&self) -> &RemaskConfig {
-        &self.config
-    }
-
     /// Gives the failed poses of `poses` (verdicts in `verdicts`, same order)
     /// a second mask each and replaces those whose new pose passes (pose and
     /// verdict; the pose keeps its instance and box in `ws`), judged as
@@ -195,8 +191,9 @@ impl Remask {
         self.found.clear();
         self.found.resize(self.candidates.len(), None);
         for _ in 0..self.config.rounds {
-            let written = self.draw(frame, ws);
-            if written == 0 {
+            if self.draw(frame, ws) == 0 {
+                // Boxes too thin to estimate were cleared; forget them too.
+                self.clear_plane(w);
                 break;
             }
             let view =
@@ -283,14 +280,14 @@ impl Remask {
     }
 
     /// Writes each candidate's second mask from its current pose into the
-    /// plane; returns how many were written.
+    /// plane, which [`Remask::clear_plane`] left clear; returns how many
+    /// were written.
     fn draw(&mut self, frame: &FrameView<'_>, ws: &Workspace) -> usize {
         let (w, h) = (frame.width(), frame.height());
         let main_ids = ws.component_ids();
         let support = ws.support_plane();
         let m = self.config.margin_m;
         let mut count = 0;
-        self.classes.fill(0);
         for j in 0..self.candidates.len() {
             let Some(pose) = self.current[j] else { continue };
             let Some(class) = (pose.class_id as usize).checked_sub(1).filter(|&c| c < self.boxes.len()) else {
