@@ -289,6 +289,17 @@ pub struct Args {
     /// `--remask`: only failed poses with at least this inlier fraction.
     #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.min_inlier_fraction)]
     pub remask_min_inliers: f32,
+    /// `--remask`: passed poses whose confidence is below this get a second
+    /// mask too (0 = off).
+    #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.max_confidence)]
+    pub remask_doubted_below: f32,
+    /// `--remask-doubted-below`: a passed pose is replaced only when the new
+    /// pose's inlier fraction is at least the old one's minus this ...
+    #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.inlier_slack)]
+    pub remask_inlier_slack: f32,
+    /// ... and its confidence at least the old one's plus this.
+    #[arg(long, default_value_t = fusepose_estimator::remask::RemaskConfig::DEFAULT.confidence_gain, allow_negative_numbers = true)]
+    pub remask_confidence_gain: f32,
     /// Pose verification against the depth image, as the daemon's
     /// `estimator.verify`: `drop` (poses that fail are removed, the daemon's
     /// default), `flag` (kept, counted) or `off`.
@@ -315,6 +326,11 @@ pub struct Args {
     pub verify_agreeing_min_inliers: Option<f32>,
     #[arg(long)]
     pub verify_agreeing_min_fit: Option<f32>,
+    /// Regions with at least this share of their depth pixels on the table
+    /// are judged on the rest, as the daemon's
+    /// `estimator.verify_trim_table_share` (above 1 = off).
+    #[arg(long)]
+    pub verify_trim_table_share: Option<f32>,
     /// `--masks net`: poses whose region the segmenter nowhere gave their
     /// class a probability of at least this fail (0 = off).
     #[arg(long)]
@@ -666,6 +682,9 @@ impl Runner {
                     margin_m: args.remask_margin,
                     rounds: args.remask_rounds,
                     min_inlier_fraction: args.remask_min_inliers,
+                    max_confidence: args.remask_doubted_below,
+                    inlier_slack: args.remask_inlier_slack,
+                    confidence_gain: args.remask_confidence_gain,
                 };
                 anyhow::ensure!(
                     (0.0..=0.1).contains(&args.remask_margin) && (0.0..=1.0).contains(&args.remask_min_inliers),
@@ -743,6 +762,7 @@ impl Runner {
                             .unwrap_or(d.agreeing_min_inlier_fraction),
                         agreeing_min_fit: args.verify_agreeing_min_fit.unwrap_or(d.agreeing_min_fit),
                         min_region_probability: min_region.max(region_floor),
+                        trim_table_share: args.verify_trim_table_share.unwrap_or(d.trim_table_share),
                         ..d
                     },
                 )
@@ -1201,9 +1221,10 @@ impl Runner {
             );
         }
         if self.remask.is_some() {
-            let fusepose_estimator::remask::RemaskStats { tried, kept, estimates } = self.remask_stats;
+            let fusepose_estimator::remask::RemaskStats { tried, kept, doubted_tried, doubted_kept, estimates } =
+                self.remask_stats;
             println!(
-                "failed poses given a second mask: {tried}, {kept} of them passed with it ({estimates} estimates)"
+                "failed poses given a second mask: {tried}, {kept} of them passed with it; passed poses doubted: {doubted_tried}, {doubted_kept} replaced ({estimates} estimates)"
             );
         }
         if self.instance_counts.truth > 0 {

@@ -223,6 +223,11 @@ pub struct EstimatorConfig {
     /// ghost: it needs just 0.3 inliers and 0.25 fit
     /// (`VerifyConfig::agreeing_mask_agreement`). Above 1 = off.
     pub verify_agreeing_mask_agreement: f32,
+    /// A region whose pixels with depth lie at least this much on the
+    /// support plane is judged on its other pixels (the segmenter spread the
+    /// object's class over the table around it;
+    /// `VerifyConfig::trim_table_share`). Above 1 = off.
+    pub verify_trim_table_share: f32,
     /// With the built-in segmenter: a pose whose region the segmenter nowhere
     /// gave its class with at least this probability fails (the segmenter
     /// made the region up; `VerifyConfig::min_region_probability`). 0 = off.
@@ -431,6 +436,7 @@ impl Default for EstimatorConfig {
             verify_max_depth_continuity: fusepose_estimator::verify::VerifyConfig::default().max_depth_continuity,
             verify_min_thin_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().min_thin_mask_agreement,
             verify_agreeing_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().agreeing_mask_agreement,
+            verify_trim_table_share: fusepose_estimator::verify::VerifyConfig::default().trim_table_share,
             verify_min_region_probability: fusepose_estimator::verify::VerifyConfig::default().min_region_probability,
             verify_region_certainty_quantile: DEFAULT_REGION_CERTAINTY_QUANTILE,
             join_parts: 1.0,
@@ -764,6 +770,13 @@ impl DaemonConfig {
                 "must be a number >= 0 (above 1 turns it off)",
             ));
         }
+        if !(e.verify_trim_table_share.is_finite() && e.verify_trim_table_share >= 0.0) {
+            return Err(invalid(
+                "estimator.verify_trim_table_share",
+                e.verify_trim_table_share,
+                "must be a number >= 0 (a share of the region's pixels; above 1 turns it off)",
+            ));
+        }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
         }
@@ -860,6 +873,23 @@ mod tests {
             err.starts_with("estimator.verify_agreeing_mask_agreement") && err.contains("above 1 turns it off"),
             "{err}"
         );
+    }
+
+    #[test]
+    fn the_table_trimming_share_is_checked_and_can_be_turned_off() {
+        let default = DaemonConfig::default().estimator.verify_trim_table_share;
+        assert_eq!(default, fusepose_estimator::verify::VerifyConfig::default().trim_table_share);
+        let off = DaemonConfig::parse("[estimator]\nverify_trim_table_share = 2.0\n").unwrap();
+        assert_eq!(off.estimator.verify_trim_table_share, 2.0, "above 1 is allowed: off");
+        for bad in ["-0.1", "nan"] {
+            let err = DaemonConfig::parse(&format!("[estimator]\nverify_trim_table_share = {bad}\n"))
+                .unwrap_err()
+                .to_string();
+            assert!(
+                err.starts_with("estimator.verify_trim_table_share") && err.contains("above 1 turns it off"),
+                "{err}"
+            );
+        }
     }
 
     #[test]

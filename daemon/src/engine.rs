@@ -196,6 +196,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
                 min_thin_mask_agreement: config.verify_min_thin_mask_agreement,
                 agreeing_mask_agreement: config.verify_agreeing_mask_agreement,
                 min_region_probability: config.verify_min_region_probability,
+                trim_table_share: config.verify_trim_table_share,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));

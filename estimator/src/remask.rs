@@ -14,6 +14,11 @@
 //! failed one when it passes. The region (the published mask) stays the
 //! segmenter's.
 //!
+//! Optionally ([`RemaskConfig::max_confidence`], off by default: measured,
+//! not adopted, docs/BENCHMARKS.md session 34) passed poses the network
+//! doubted get a second mask too, and are replaced only by a pose it is
+//! surer of.
+//!
 //! Class planes only: an instance plane's masks are the producer's.
 
 use fusepose_scene::ObjectSet;
@@ -47,10 +52,32 @@ pub struct RemaskConfig {
     /// Only failed poses with at least this verification inlier fraction:
     /// a pose with none of its surface on the depth is no object's.
     pub min_inlier_fraction: f32,
+    /// Passed poses whose network confidence is below this get a second
+    /// mask too, after the failed ones, least confident first (0 = off): the
+    /// network doubts a pose most often when its region held only part of
+    /// the object (shadows and table texture took the rest), and a pose from
+    /// part of an object's texture and shape is a few centimetres or a
+    /// handle's turn off though it passes.
+    pub max_confidence: f32,
+    /// A passed pose is replaced only when its successor's verification
+    /// inlier fraction is at least its own minus this (the depth must not
+    /// say the successor is worse) ...
+    pub inlier_slack: f32,
+    /// ... and the network is surer of the successor: its confidence at
+    /// least the old one's plus this.
+    pub confidence_gain: f32,
 }
 
 impl RemaskConfig {
-    pub const DEFAULT: Self = Self { max_regions: 4, margin_m: 0.01, rounds: 2, min_inlier_fraction: 0.3 };
+    pub const DEFAULT: Self = Self {
+        max_regions: 4,
+        margin_m: 0.01,
+        rounds: 2,
+        min_inlier_fraction: 0.3,
+        max_confidence: 0.0,
+        inlier_slack: 0.02,
+        confidence_gain: 0.0,
+    };
 
     pub fn is_on(&self) -> bool {
         self.max_regions > 0 && self.rounds > 0
@@ -64,6 +91,10 @@ pub struct RemaskStats {
     pub tried: usize,
     /// Of them, replaced by a pose that passed.
     pub kept: usize,
+    /// Passed poses the network doubted given a second mask.
+    pub doubted_tried: usize,
+    /// Of them, replaced.
+    pub doubted_kept: usize,
     /// Piece estimates made.
     pub estimates: usize,
 }
@@ -72,6 +103,8 @@ impl std::ops::AddAssign for RemaskStats {
     fn add_assign(&mut self, o: Self) {
         self.tried += o.tried;
         self.kept += o.kept;
+        self.doubted_tried += o.doubted_tried;
+        self.doubted_kept += o.doubted_kept;
         self.estimates += o.estimates;
     }
 }
@@ -90,8 +123,11 @@ pub struct Remask {
     written: Vec<[u16; 4]>,
     ws: Workspace,
     poses: PoseSet,
-    /// Indices (in the frame's poses) of the failed poses taken.
+    /// Indices (in the frame's poses) of the poses taken: failed ones first,
+    /// then passed ones the network doubted.
     candidates: Vec<usize>,
+    /// Passed poses the network doubted (indices), before they join `candidates`.
+    doubted: Vec<usize>,
     /// Per candidate: its latest pose (the failed one, then each estimate's).
     current: Vec<Option<crate::ObjectPose>>,
     /// Per candidate: the latest estimate's pose (kept when a later round gives none).
@@ -126,6 +162,7 @@ impl Remask {
             ws,
             poses: PoseSet::with_capacity(regions),
             candidates: Vec::with_capacity(2 * ws_config.max_instances.max(regions)),
+            doubted: Vec::with_capacity(2 * ws_config.max_instances.max(regions)),
             current: Vec::with_capacity(regions),
             found: Vec::with_capacity(regions),
             // Room for each instance's class alternate too.
@@ -170,22 +207,32 @@ impl Remask {
         }
         self.passed_regions.clear();
         self.candidates.clear();
+        self.doubted.clear();
         for (i, (p, v)) in poses.as_slice().iter().zip(verdicts.iter()).enumerate() {
             let Some(id) = ws.component_id(p.instance_id as usize) else { continue };
             if v.passed {
                 self.passed_regions.push(id);
+                if p.confidence < self.config.max_confidence {
+                    self.doubted.push(i);
+                }
             } else if v.inlier_fraction >= self.config.min_inlier_fraction {
                 self.candidates.push(i);
             }
         }
         // Best fit first: the likeliest to be an object gets the contested pixels.
         self.candidates.sort_unstable_by(|&a, &b| verdicts[b].fit.total_cmp(&verdicts[a].fit));
+        // Then the least confident: a failed pose is an object lost, a doubted one imprecise.
+        let all = poses.as_slice();
+        self.doubted.sort_unstable_by(|&a, &b| all[a].confidence.total_cmp(&all[b].confidence));
+        self.candidates.extend_from_slice(&self.doubted);
         let affordable = budget.map_or(usize::MAX, |b| b / self.config.rounds.max(1));
         self.candidates.truncate(self.config.max_regions.min(affordable));
         if self.candidates.is_empty() {
             return Ok(stats);
         }
-        stats.tried = self.candidates.len();
+        let doubted_tried = self.candidates.iter().filter(|&&i| verdicts[i].passed).count();
+        stats.tried = self.candidates.len() - doubted_tried;
+        stats.doubted_tried = doubted_tried;
         self.current.clear();
         self.current.extend(self.candidates.iter().map(|&i| Some(poses.as_slice()[i])));
         self.found.clear();
@@ -234,9 +281,20 @@ impl Remask {
             let Some(v) = verify_on_region(verifier, frame, ws, segmenter, &pose).filter(|v| v.passed) else {
                 continue;
             };
+            let was = verdicts[i];
+            if was.passed {
+                // The depth must not say the successor is worse.
+                if v.inlier_fraction < was.inlier_fraction - self.config.inlier_slack
+                    || pose.confidence < old.confidence + self.config.confidence_gain
+                {
+                    continue;
+                }
+                stats.doubted_kept += 1;
+            } else {
+                stats.kept += 1;
+            }
             poses.replace(i, pose);
             verdicts[i] = v;
-            stats.kept += 1;
         }
         Ok(stats)
     }

@@ -122,6 +122,15 @@ pub struct VerifyConfig {
     /// objects is rarely that sure of them, and there it drops many real
     /// poses (docs/BENCHMARKS.md, session 19).
     pub min_region_probability: f32,
+    /// A region whose pixels with depth lie on the support plane (under the
+    /// class's floor, [`crate::Workspace::class_floor`]) at least this much
+    /// is judged on its other pixels ([`verify_on_region`]): the segmenter
+    /// gave a patch of table the object's class around it (a green bowl on
+    /// a green table), and a pose of the object cannot cover the table. A
+    /// region all on the table keeps no pixel with depth and fails; a pose
+    /// judged so also needs [`Self::min_thin_mask_agreement`] of its
+    /// depth-agreeing surface in the trimmed region. Above 1 = off.
+    pub trim_table_share: f32,
 }
 
 impl Default for VerifyConfig {
@@ -145,6 +154,7 @@ impl Default for VerifyConfig {
             agreeing_min_fit: 0.25,
             agreeing_min_diameter_m: 0.15,
             min_region_probability: 0.0,
+            trim_table_share: 0.5,
         }
     }
 }
@@ -217,6 +227,9 @@ pub struct Verifier {
     diameters: Vec<f32>,
     /// Per class (id − 1): farthest surface sample from the object's origin, metres.
     radii: Vec<f32>,
+    /// A region's pixels off the table ([`VerifyConfig::trim_table_share`]);
+    /// zero outside the call that writes it. Sized at the first frame.
+    off_table: Vec<u32>,
 }
 
 /// Objects whose thinnest extent is below this (metres) step off a table by
@@ -259,6 +272,7 @@ impl Verifier {
                 .map(|s| s.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).fold(0.0, f32::max))
                 .collect(),
             samples,
+            off_table: Vec::new(),
         }
     }
 
@@ -589,7 +603,10 @@ pub fn verify_on_region(
 ) -> Option<Verification> {
     let id = ws.component_id(pose.instance_id as usize)?;
     let mask = ws.mask_ref(id, pose.bbox);
-    let mut v = verifier.verify(frame, mask, pose);
+    let mut v = match verify_off_table(verifier, frame, ws, id, pose) {
+        Some(v) => v,
+        None => verifier.verify(frame, mask, pose),
+    };
     if let Some(seg) = segmenter {
         let min = verifier.config().min_region_probability;
         v.judge_region_probability(seg.region_probability(mask.ids, id, pose.class_id, pose.bbox), min);
@@ -598,6 +615,53 @@ pub fn verify_on_region(
         v.passed = false;
     }
     Some(v)
+}
+
+/// [`Verifier::verify`] on region `id`'s pixels off the table when at least
+/// [`VerifyConfig::trim_table_share`] of them lie on it; None otherwise (or
+/// with no support plane): the caller judges the whole region.
+fn verify_off_table(
+    verifier: &mut Verifier,
+    frame: &FrameView<'_>,
+    ws: &crate::Workspace,
+    id: u32,
+    pose: &ObjectPose,
+) -> Option<Verification> {
+    let share = verifier.config.trim_table_share;
+    if share > 1.0 {
+        return None;
+    }
+    let mut plane = std::mem::take(&mut verifier.off_table);
+    let n = frame.width() * frame.height();
+    if plane.len() != n {
+        plane.clear();
+        plane.resize(n, 0);
+    }
+    // The plane is sized above on the first call, trimmed or not: no later
+    // frame allocates.
+    if ws.share_on_support(frame, id, pose.class_id, pose.bbox).is_none_or(|s| s < share) {
+        verifier.off_table = plane;
+        return None;
+    }
+    let verdict = ws.write_off_support(frame, id, pose.class_id, pose.bbox, &mut plane).map(|bbox| {
+        // Nothing left: judged on an empty mask, the pose fails.
+        let bbox = if bbox[0] > bbox[2] { pose.bbox } else { bbox };
+        let mut v = verifier.verify(frame, MaskRef { ids: &plane, id, bbox }, pose);
+        // A smaller mask is easier to cover: the pose's own surface must
+        // lie in it too, as a thin object's must in its region (a pose
+        // whose depth-agreeing surface lies on other objects is a ghost).
+        if v.mask_agreement < verifier.config.min_thin_mask_agreement {
+            v.passed = false;
+        }
+        v
+    });
+    let [u0, v0, u1, v1] = pose.bbox.map(|x| x as usize);
+    let w = frame.width();
+    for v in v0..=v1.min(frame.height().saturating_sub(1)) {
+        plane[v * w + u0..=(v * w + u1).min(v * w + w - 1)].fill(0);
+    }
+    verifier.off_table = plane;
+    verdict
 }
 
 /// Camera-frame projection of object-frame points at `pose`: pixel (u, v)

@@ -530,6 +530,91 @@ impl Workspace {
         self.support
     }
 
+    /// Height above the support plane under which a point is the table's
+    /// rather than an object of `class_id`'s (metres; 0 = off).
+    pub fn class_floor(&self, class_id: u16) -> f32 {
+        match self.class_floors.get((class_id as usize).wrapping_sub(1)) {
+            Some(&f) => f.min(self.config.support_floor_m),
+            None => self.config.support_floor_m,
+        }
+    }
+
+    /// Share of region `id`'s pixels with depth (within `bbox`, every
+    /// second row and column) whose points lie on the support plane: lower
+    /// than twice `class_id`'s floor (at the floor itself depth noise leaves
+    /// table pixels scattered over the region). None when this frame has no
+    /// support plane, the class no floor or the region no pixel with depth.
+    pub fn share_on_support(&self, frame: &FrameView<'_>, id: u32, class_id: u16, bbox: [u16; 4]) -> Option<f32> {
+        let (mut with_depth, mut on_table) = (0u32, 0u32);
+        self.each_off_support(frame, id, class_id, bbox, 2, |_, on| {
+            with_depth += on.is_some() as u32;
+            on_table += (on == Some(true)) as u32;
+        })?;
+        (with_depth > 0).then(|| on_table as f32 / with_depth as f32)
+    }
+
+    /// Writes `id` into `out` (a plane of the frame's size, zero in `bbox`)
+    /// at region `id`'s pixels within `bbox` that do not lie on the support
+    /// plane as [`Workspace::share_on_support`] judges (pixels without depth
+    /// included: no evidence either way); returns their box (u_min > u_max
+    /// when none). None as for `share_on_support`. No allocation.
+    pub fn write_off_support(
+        &self,
+        frame: &FrameView<'_>,
+        id: u32,
+        class_id: u16,
+        bbox: [u16; 4],
+        out: &mut [u32],
+    ) -> Option<[u16; 4]> {
+        if out.len() < frame.width() * frame.height() {
+            return None;
+        }
+        let mut b = [u16::MAX, u16::MAX, 0, 0];
+        self.each_off_support(frame, id, class_id, bbox, 1, |p, on| {
+            if on != Some(true) {
+                out[p] = id;
+                let (u, v) = ((p % frame.width()) as u16, (p / frame.width()) as u16);
+                b = [b[0].min(u), b[1].min(v), b[2].max(u), b[3].max(v)];
+            }
+        })?;
+        Some(b)
+    }
+
+    /// Calls `f(pixel, on the table?)` (None: no depth) for region `id`'s
+    /// pixels within `bbox`, every `step`-th row and column.
+    fn each_off_support(
+        &self,
+        frame: &FrameView<'_>,
+        id: u32,
+        class_id: u16,
+        bbox: [u16; 4],
+        step: usize,
+        mut f: impl FnMut(usize, Option<bool>),
+    ) -> Option<()> {
+        let floor = self.class_floor(class_id);
+        let plane = self.support.filter(|_| floor > 0.0)?;
+        let (w, h) = (frame.width(), frame.height());
+        let ids = self.finder.component_ids();
+        if ids.len() < w * h || w == 0 || h == 0 {
+            return None;
+        }
+        let [u0, v0, u1, v1] = bbox.map(|x| x as usize);
+        for v in (v0..=v1.min(h - 1)).step_by(step) {
+            for u in (u0..=u1.min(w - 1)).step_by(step) {
+                let p = v * w + u;
+                if ids[p] != id {
+                    continue;
+                }
+                let on = frame
+                    .depth
+                    .metres(p)
+                    .map(|z| plane.height(&sampling::back_project(frame, u, v, z).into()).abs() < 2.0 * floor);
+                f(p, on);
+            }
+        }
+        Some(())
+    }
+
     /// Fits the support plane of this frame to its background pixels (see
     /// [`WorkspaceConfig::support_floor_m`]).
     fn fit_support(&mut self, frame: &FrameView<'_>, labels: &LabelPlane<'_>) {
@@ -559,10 +644,7 @@ impl Workspace {
         let [u_min, v_min, u_max, v_max] = component.bbox.map(|x| x as usize);
         self.candidates.clear();
         let ids = self.finder.component_ids();
-        let floor = match self.class_floors.get((component.class_id as usize).wrapping_sub(1)) {
-            Some(&f) => f.min(self.config.support_floor_m),
-            None => self.config.support_floor_m,
-        };
+        let floor = self.class_floor(component.class_id);
         // No floor for this class: no pixel needs back-projecting.
         let support = self.support.filter(|_| floor > 0.0);
         for v in v_min..=v_max {

@@ -205,7 +205,7 @@ fn the_second_look_does_not_allocate_after_warm_up() {
 fn second_look_without_allocations(recut_config: fusepose_estimator::recut::RecutConfig, rows_of_three: bool) {
     use fusepose_estimator::interpenetration::Solids;
     use fusepose_estimator::recut::Recut;
-    use fusepose_estimator::verify::{Verifier, VerifyConfig};
+    use fusepose_estimator::verify::{Verifier, VerifyConfig, verify_on_region};
 
     let l = l_block();
     let objects = object_set(std::slice::from_ref(&l));
@@ -224,8 +224,7 @@ fn second_look_without_allocations(recut_config: fusepose_estimator::recut::Recu
         icp.estimate(&view, &mut ws, &mut poses).unwrap();
         verdicts.clear();
         for p in poses.as_slice() {
-            let id = ws.component_id(p.instance_id as usize).unwrap();
-            verdicts.push(verifier.verify(&view, ws.mask_ref(id, p.bbox), p));
+            verdicts.push(verify_on_region(&mut verifier, &view, &ws, None, p).unwrap());
         }
         let stats =
             recut.run(&view, &mut ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap();
@@ -260,7 +259,7 @@ fn second_look_without_allocations(recut_config: fusepose_estimator::recut::Recu
 #[test]
 fn second_masks_do_not_allocate_after_warm_up() {
     use fusepose_estimator::remask::{Remask, RemaskConfig};
-    use fusepose_estimator::verify::{Verifier, VerifyConfig};
+    use fusepose_estimator::verify::{Verifier, VerifyConfig, verify_on_region};
     use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
 
     let l = l_block();
@@ -281,8 +280,7 @@ fn second_masks_do_not_allocate_after_warm_up() {
         estimator.estimate(&view, &mut ws, &mut poses).unwrap();
         verdicts.clear();
         for p in poses.as_slice() {
-            let id = ws.component_id(p.instance_id as usize).unwrap();
-            verdicts.push(verifier.verify(&view, ws.mask_ref(id, p.bbox), p));
+            verdicts.push(verify_on_region(&mut verifier, &view, &ws, None, p).unwrap());
         }
         let mut pieces = common::partial(truth, object_pixels);
         remask.run(&view, &ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap().kept
@@ -295,4 +293,56 @@ fn second_masks_do_not_allocate_after_warm_up() {
         assert_eq!(n, 0, "frame {i}: {n} allocations in prepare, estimate, verification and the second masks");
         assert_eq!(kept, (i != 1) as usize, "frame {i}: failed poses replaced");
     }
+}
+
+#[test]
+fn second_masks_too_thin_to_estimate_leave_nothing_behind() {
+    use fusepose_estimator::remask::{Remask, RemaskConfig};
+    use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig, verify_on_region};
+    use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
+
+    let l = l_block();
+    let objects = object_set(std::slice::from_ref(&l));
+    let config = WorkspaceConfig { num_classes: 1, support_floor_m: DEFAULT_SUPPORT_FLOOR_M, ..Default::default() };
+    let mut ws = Workspace::new(config).unwrap();
+    let mut verifier = Verifier::new(&objects, VerifyConfig::default());
+    let mut remask = Remask::new(&objects, config, RemaskConfig::DEFAULT).unwrap();
+    let mut poses = PoseSet::with_capacity(2 * config.max_instances);
+    let mut verdicts = Vec::with_capacity(2 * config.max_instances);
+    let truth = pose([0.0, 0.0, 1.0], 10.0, [0.0, 0.0, 0.5]);
+    let whole = painted(render(&[(1, &l, truth)]));
+    let (part, object_pixels) = common::left_part(painted(render(&[(1, &l, truth)])));
+    let mut estimator = common::partial(truth, object_pixels);
+    // A failed pose hanging 20 cm in front of its object: the box it
+    // places holds no measured point, so its second mask is too thin to
+    // estimate (the verdict is the caller's, made up here to reach that case).
+    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64, hanging: bool| {
+        let view = frame.view();
+        ws.prepare(&view, seed).unwrap();
+        estimator.estimate(&view, &mut ws, &mut poses).unwrap();
+        verdicts.clear();
+        for p in poses.as_slice() {
+            verdicts.push(verify_on_region(&mut verifier, &view, &ws, None, p).unwrap());
+        }
+        if hanging {
+            let mut p = poses.as_slice()[0];
+            p.translation.z -= 0.2;
+            poses.replace(0, p);
+            verdicts[0] = Verification { passed: false, inlier_fraction: 0.5, ..verdicts[0] };
+        }
+        let mut pieces = common::partial(truth, object_pixels);
+        remask.run(&view, &ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap()
+    };
+    assert_eq!(frame_of(&whole, 0, false).tried, 0);
+    assert_eq!(frame_of(&part, 1, false).kept, 1, "warm-up: the second mask works");
+    // More frames than the remask keeps boxes for: a box left behind by
+    // each would outgrow its list.
+    for i in 0..2 * RemaskConfig::DEFAULT.max_regions + 2 {
+        let mut stats = Default::default();
+        let n = allocations_in(|| stats = frame_of(&part, 10 + i as u64, true));
+        assert_eq!(n, 0, "frame {i}: {n} allocations with every second mask too thin");
+        assert_eq!((stats.tried, stats.kept, stats.estimates), (1, 0, 0), "frame {i}: tried, nothing estimated");
+    }
+    // The plane was left clear: the next frame's second mask is whole again.
+    assert_eq!(frame_of(&part, 99, false).kept, 1, "after the thin frames");
 }

@@ -3,7 +3,8 @@
 //! fails verification; the pixels inside that pose's grown box make a mask
 //! that holds the object, and its estimate replaces the failed pose. A
 //! ghost region on the table gets no second mask; instance planes are the
-//! producer's and are left alone.
+//! producer's and are left alone. A pose that passed but that the network
+//! doubted is replaced only by one it is surer of.
 
 mod common;
 
@@ -11,7 +12,7 @@ use common::{PoseEach, l_block, left_part, object_set, painted, partial, render}
 use fusepose_estimator::remask::{Remask, RemaskConfig, RemaskStats};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
-use fusepose_estimator::{Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
@@ -31,6 +32,15 @@ struct Outcome {
 /// `support_floor_m`: the workspace's (the daemon's default is
 /// [`DEFAULT_SUPPORT_FLOOR_M`]).
 fn second_mask(view: &FrameView<'_>, estimator: &mut dyn Estimator, support_floor_m: f32) -> Outcome {
+    second_mask_with(view, estimator, support_floor_m, RemaskConfig::DEFAULT)
+}
+
+fn second_mask_with(
+    view: &FrameView<'_>,
+    estimator: &mut dyn Estimator,
+    support_floor_m: f32,
+    config: RemaskConfig,
+) -> Outcome {
     let objects = object_set(&[l_block()]);
     let ws_config = WorkspaceConfig { num_classes: 1, support_floor_m, ..Default::default() };
     let mut ws = Workspace::new(ws_config).unwrap();
@@ -44,7 +54,7 @@ fn second_mask(view: &FrameView<'_>, estimator: &mut dyn Estimator, support_floo
         .map(|p| verifier.verify(view, ws.mask_ref(ws.component_id(p.instance_id as usize).unwrap(), p.bbox), p))
         .collect();
     let before = verdicts.clone();
-    let mut remask = Remask::new(&objects, ws_config, RemaskConfig::DEFAULT).unwrap();
+    let mut remask = Remask::new(&objects, ws_config, config).unwrap();
     let stats = remask.run(view, &ws, &mut poses, &mut verdicts, estimator, &mut verifier, None, 7).unwrap();
     Outcome { before, poses, verdicts, stats, ws }
 }
@@ -104,4 +114,87 @@ fn an_instance_plane_is_left_to_its_producer() {
     assert!(!out.before[0].passed);
     assert_eq!(out.stats, RemaskStats::default(), "instance planes are not looked at");
     assert!(!out.verdicts[0].passed);
+}
+
+/// Poses an instance whose mask holds at least 70 % of the object's
+/// `object_pixels` at the truth with confidence `whole`, else 4° off about
+/// the camera's axis (a pose that passes verification) with confidence
+/// `part`: the network on a region that lost part of its object.
+struct Doubting {
+    object_pixels: u32,
+    part: f32,
+    whole: f32,
+}
+
+impl Estimator for Doubting {
+    fn name(&self) -> &str {
+        "doubting"
+    }
+
+    fn estimate(
+        &mut self,
+        _frame: &FrameView<'_>,
+        ws: &mut Workspace,
+        out: &mut PoseSet,
+    ) -> Result<(), fusepose_estimator::EstimateError> {
+        out.clear();
+        for (i, inst) in ws.instances.iter().enumerate() {
+            let whole = inst.pixels as f64 >= 0.7 * self.object_pixels as f64;
+            let turn = UnitQuaternion::from_scaled_axis(Vector3::z() * if whole { 0.0 } else { 4f64.to_radians() });
+            out.push(ObjectPose {
+                class_id: inst.class_id,
+                instance_id: i as u16,
+                rotation: turn * truth().rotation,
+                translation: truth().translation.vector,
+                confidence: if whole { self.whole } else { self.part },
+                mask_pixels: inst.pixels,
+                bbox: inst.bbox,
+                iterations: 0,
+            });
+        }
+        Ok(())
+    }
+}
+
+const DOUBTED: RemaskConfig = RemaskConfig { max_confidence: 0.8, ..RemaskConfig::DEFAULT };
+
+#[test]
+fn a_pose_the_network_doubted_is_replaced_by_one_it_is_surer_of() {
+    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
+    let mut net = Doubting { object_pixels, part: 0.5, whole: 0.9 };
+    let out = second_mask_with(&frame.view(), &mut net, DEFAULT_SUPPORT_FLOOR_M, DOUBTED);
+    assert!(out.before[0].passed, "the pose 4° off passes: {:?}", out.before[0]);
+    assert_eq!((out.stats.tried, out.stats.doubted_tried, out.stats.doubted_kept), (0, 1, 1), "{:?}", out.stats);
+    let p = out.poses.as_slice()[0];
+    assert!(p.rotation.angle_to(&truth().rotation) < 1e-9, "the second mask's pose is the truth");
+    assert_eq!(p.confidence, 0.9);
+    assert!(out.verdicts[0].passed);
+    let inst = out.ws.instances[p.instance_id as usize];
+    assert_eq!((p.bbox, p.mask_pixels), (inst.bbox, inst.pixels), "the published mask stays the segmenter's");
+}
+
+#[test]
+fn a_doubted_pose_stays_when_the_network_is_no_surer_of_its_successor() {
+    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
+    let mut net = Doubting { object_pixels, part: 0.5, whole: 0.45 };
+    let out = second_mask_with(&frame.view(), &mut net, DEFAULT_SUPPORT_FLOOR_M, DOUBTED);
+    assert!(out.before[0].passed);
+    assert_eq!((out.stats.doubted_tried, out.stats.doubted_kept), (1, 0), "{:?}", out.stats);
+    let p = out.poses.as_slice()[0];
+    assert!((p.rotation.angle_to(&truth().rotation) - 4f64.to_radians()).abs() < 1e-9, "the first pose stays");
+    let (a, b) = (out.verdicts[0], out.before[0]);
+    assert_eq!(
+        (a.fit, a.inlier_fraction, a.mask_agreement),
+        (b.fit, b.inlier_fraction, b.mask_agreement),
+        "its verdict"
+    );
+}
+
+#[test]
+fn a_pose_the_network_is_sure_of_gets_no_second_mask() {
+    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
+    let mut net = Doubting { object_pixels, part: 0.85, whole: 0.99 };
+    let out = second_mask_with(&frame.view(), &mut net, DEFAULT_SUPPORT_FLOOR_M, DOUBTED);
+    assert!(out.before[0].passed);
+    assert_eq!(out.stats, RemaskStats::default(), "confidence 0.85 is above the 0.8 limit");
 }
