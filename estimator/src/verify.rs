@@ -129,7 +129,9 @@ pub struct VerifyConfig {
     /// a green table), and a pose of the object cannot cover the table. A
     /// region all on the table keeps no pixel with depth and fails; a pose
     /// judged so also needs [`Self::min_thin_mask_agreement`] of its
-    /// depth-agreeing surface in the trimmed region. Above 1 = off.
+    /// depth-agreeing surface in the trimmed region. Objects thinner than
+    /// [`THIN_OBJECT_M`] are never judged so (they lie within the table's
+    /// height band). Above 1 = off.
     pub trim_table_share: f32,
 }
 
@@ -628,7 +630,10 @@ fn verify_off_table(
     pose: &ObjectPose,
 ) -> Option<Verification> {
     let share = verifier.config.trim_table_share;
-    if share > 1.0 {
+    // A thin object lies within the table's height band: by height its
+    // region is the table's.
+    let thin = (pose.class_id as usize).checked_sub(1).and_then(|c| verifier.thin.get(c)).is_none_or(|&t| t);
+    if share > 1.0 || thin {
         return None;
     }
     let mut plane = std::mem::take(&mut verifier.off_table);

@@ -315,6 +315,37 @@ fn a_thin_plate_lying_on_the_table_passes() {
     let shifted = Pose::from_parts((pose.translation.vector + normal * 0.03).into(), rotation);
     let bad = Verifier::new(&set, VerifyConfig::default()).verify(&view, mask(&ws, 0), &pose_of(1, 0, &ws, &shifted));
     assert!(!bad.passed && bad.fit < v.fit, "{bad:?} vs {v:?}");
+
+    // Its region spread over the table around it: by height most of it is
+    // the table's, but a thin object is never judged on what stands out of
+    // the table (it lies within the table's height band).
+    use fusepose_estimator::verify::verify_on_region;
+    use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
+    let mut spread = common::render(&[(1, &plate, pose)]);
+    let w = spread.intrinsics.width as usize;
+    let own: Vec<usize> = (0..spread.labels.len()).filter(|&p| spread.labels[p] == 1).collect();
+    let (u0, u1) = own.iter().fold((w, 0), |(a, b), &p| (a.min(p % w), b.max(p % w)));
+    let (v0, v1) = own.iter().fold((usize::MAX, 0), |(a, b), &p| (a.min(p / w), b.max(p / w)));
+    for v in v0.saturating_sub(60)..=v1 + 60 {
+        for u in u0.saturating_sub(60)..=(u1 + 60).min(w - 1) {
+            if let Some(l) = spread.labels.get_mut(v * w + u) {
+                *l = 1;
+            }
+        }
+    }
+    let view = spread.view();
+    let config =
+        WorkspaceConfig { num_classes: 1, support_floor_m: DEFAULT_SUPPORT_FLOOR_M, ..WorkspaceConfig::default() };
+    let mut ws = Workspace::new(config).unwrap();
+    ws.support_floors(&fusepose_estimator::support::class_floors(&set, DEFAULT_SUPPORT_FLOOR_M));
+    assert_eq!(ws.prepare(&view, 1).unwrap(), 1);
+    let p = pose_of(1, 0, &ws, &pose);
+    let share = ws.share_on_support(&view, ws.component_id(0).unwrap(), 1, p.bbox).unwrap();
+    assert!(share >= 0.5, "the spread region is mostly table by height: {share}");
+    let off = VerifyConfig { trim_table_share: 2.0, ..VerifyConfig::default() };
+    let a = verify_on_region(&mut Verifier::new(&set, VerifyConfig::default()), &view, &ws, None, &p).unwrap();
+    let b = verify_on_region(&mut Verifier::new(&set, off), &view, &ws, None, &p).unwrap();
+    assert_eq!((a.passed, a.fit, a.mask_coverage), (b.passed, b.fit, b.mask_coverage), "thin: never trimmed");
 }
 
 /// A pose turned 15-25° off a large object leaves many of its samples off
