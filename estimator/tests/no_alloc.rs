@@ -253,50 +253,17 @@ fn second_look_without_allocations(recut_config: fusepose_estimator::recut::Recu
     }
 }
 
-/// Second masks (`fusepose_estimator::remask`): after the warm-up frame,
-/// giving a failed pose a second mask, estimating and judging it allocates
-/// nothing.
-#[test]
-fn second_masks_do_not_allocate_after_warm_up() {
-    use fusepose_estimator::remask::{Remask, RemaskConfig};
-    use fusepose_estimator::verify::{Verifier, VerifyConfig, verify_on_region};
-    use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
-
-    let l = l_block();
-    let objects = object_set(std::slice::from_ref(&l));
-    let config = WorkspaceConfig { num_classes: 1, support_floor_m: DEFAULT_SUPPORT_FLOOR_M, ..Default::default() };
-    let mut ws = Workspace::new(config).unwrap();
-    let mut verifier = Verifier::new(&objects, VerifyConfig::default());
-    let mut remask = Remask::new(&objects, config, RemaskConfig::DEFAULT).unwrap();
-    let mut poses = PoseSet::with_capacity(2 * config.max_instances);
-    let mut verdicts = Vec::with_capacity(2 * config.max_instances);
-    let truth = pose([0.0, 0.0, 1.0], 10.0, [0.0, 0.0, 0.5]);
-    let whole = painted(render(&[(1, &l, truth)]));
-    let (part, object_pixels) = common::left_part(painted(render(&[(1, &l, truth)])));
-    let mut estimator = common::partial(truth, object_pixels);
-    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| {
-        let view = frame.view();
-        ws.prepare(&view, seed).unwrap();
-        estimator.estimate(&view, &mut ws, &mut poses).unwrap();
-        verdicts.clear();
-        for p in poses.as_slice() {
-            verdicts.push(verify_on_region(&mut verifier, &view, &ws, None, p).unwrap());
-        }
-        let mut pieces = common::partial(truth, object_pixels);
-        remask.run(&view, &ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap().kept
-    };
-    // Warm-up on a frame whose pose passes: no second mask yet.
-    assert_eq!(frame_of(&whole, 0), 0);
-    for (i, frame) in [&part, &whole, &part].into_iter().enumerate() {
-        let mut kept = 0;
-        let n = allocations_in(|| kept = frame_of(frame, 10 + i as u64));
-        assert_eq!(n, 0, "frame {i}: {n} allocations in prepare, estimate, verification and the second masks");
-        assert_eq!(kept, (i != 1) as usize, "frame {i}: failed poses replaced");
-    }
-}
-
-#[test]
-fn second_masks_too_thin_to_estimate_leave_nothing_behind() {
+/// An L block on the table and two frames of it, its region whole and cut
+/// to its left part (`common::left_part`, whose pose fails), and a run of one
+/// frame: prepare, estimate, verify (as the daemon does) and second masks.
+/// `hanging` moves the failed pose 20 cm in front of its object, with a made-up
+/// failed verdict: the box it places holds no measured point, so its second
+/// mask is too thin to estimate.
+fn second_mask_rig() -> (
+    common::SyntheticFrame,
+    common::SyntheticFrame,
+    impl FnMut(&common::SyntheticFrame, u64, bool) -> fusepose_estimator::remask::RemaskStats,
+) {
     use fusepose_estimator::remask::{Remask, RemaskConfig};
     use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig, verify_on_region};
     use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
@@ -313,10 +280,7 @@ fn second_masks_too_thin_to_estimate_leave_nothing_behind() {
     let whole = painted(render(&[(1, &l, truth)]));
     let (part, object_pixels) = common::left_part(painted(render(&[(1, &l, truth)])));
     let mut estimator = common::partial(truth, object_pixels);
-    // A failed pose hanging 20 cm in front of its object: the box it
-    // places holds no measured point, so its second mask is too thin to
-    // estimate (the verdict is the caller's, made up here to reach that case).
-    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64, hanging: bool| {
+    let frame_of = move |frame: &common::SyntheticFrame, seed: u64, hanging: bool| {
         let view = frame.view();
         ws.prepare(&view, seed).unwrap();
         estimator.estimate(&view, &mut ws, &mut poses).unwrap();
@@ -333,6 +297,31 @@ fn second_masks_too_thin_to_estimate_leave_nothing_behind() {
         let mut pieces = common::partial(truth, object_pixels);
         remask.run(&view, &ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap()
     };
+    (whole, part, frame_of)
+}
+
+/// Second masks (`fusepose_estimator::remask`): after the warm-up frame,
+/// giving a failed pose a second mask, estimating and judging it allocates
+/// nothing.
+#[test]
+fn second_masks_do_not_allocate_after_warm_up() {
+    let (whole, part, mut run) = second_mask_rig();
+    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| run(frame, seed, false).kept;
+    // Warm-up on a frame whose pose passes: no second mask yet.
+    assert_eq!(frame_of(&whole, 0), 0);
+    for (i, frame) in [&part, &whole, &part].into_iter().enumerate() {
+        let mut kept = 0;
+        let n = allocations_in(|| kept = frame_of(frame, 10 + i as u64));
+        assert_eq!(n, 0, "frame {i}: {n} allocations in prepare, estimate, verification and the second masks");
+        assert_eq!(kept, (i != 1) as usize, "frame {i}: failed poses replaced");
+    }
+}
+
+#[test]
+fn second_masks_too_thin_to_estimate_leave_nothing_behind() {
+    use fusepose_estimator::remask::RemaskConfig;
+
+    let (whole, part, mut frame_of) = second_mask_rig();
     assert_eq!(frame_of(&whole, 0, false).tried, 0);
     assert_eq!(frame_of(&part, 1, false).kept, 1, "warm-up: the second mask works");
     // More frames than the remask keeps boxes for: a box left behind by
