@@ -266,6 +266,11 @@ pub struct Args {
     /// daemon's `estimator.recut_refit`.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.refit, action = clap::ArgAction::Set)]
     pub recut_refit: bool,
+    /// `--recut-refit`: a pixel goes first to the best-verified piece whose
+    /// posed box holds it (within 5 mm), not to the nearest box centre. Off:
+    /// measured, not adopted (docs/BENCHMARKS.md, session 35).
+    #[arg(long)]
+    pub recut_refit_by_verdict: bool,
     /// `--recut`: a piece is a copy only when its pose's verification fit is
     /// at least this (0 = any passing pose).
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit)]
@@ -668,6 +673,7 @@ impl Runner {
                     max_pieces: args.recut_pieces,
                     poses: args.recut_poses,
                     refit: args.recut_refit,
+                    refit_by_verdict: args.recut_refit_by_verdict,
                     min_piece_fit: args.recut_min_piece_fit,
                     ..fusepose_estimator::recut::RecutConfig::DEFAULT
                 };

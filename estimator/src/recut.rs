@@ -72,6 +72,11 @@ struct Refused {
 
 /// Rounds of [`Recut::refit`] and estimate: each pose places the next cut.
 const REFIT_ROUNDS: usize = 2;
+/// A posed box holds a point this far outside its faces
+/// ([`RecutConfig::refit_by_verdict`]): a copy's surface points lie on its
+/// box's faces, and depth noise puts half of them just outside (with no
+/// margin the order never applies: tune_pairs as without it, session 35).
+const REFIT_HOLD_M: f32 = 0.005;
 /// Fewest valid-depth pixels of a region worth cutting.
 const MIN_POINTS: usize = 64;
 /// Each piece of a cut in two must hold at least this share of the region's
@@ -168,6 +173,16 @@ pub struct RecutConfig {
     /// ([`Recut::refit`]): a cut between point clusters misses the contact
     /// between copies whose mass lies off their centre (an L, a mug).
     pub refit: bool,
+    /// With [`RecutConfig::refit`]: a pixel goes first to the best-verified
+    /// piece (passed before failed, then by fit) whose posed box holds its
+    /// point within [`REFIT_HOLD_M`], and to the nearest box only where none
+    /// does. A piece holding parts of two copies is posed between them; by
+    /// nearest box centre it keeps the part of the copy its neighbour posed
+    /// exactly, and is never posed clean. Off: on the tuning splits it gains
+    /// on pairs and heaps but adds stray poses on heaps, wood blocks posed
+    /// between two whose coplanar tops the depth cannot tell apart
+    /// (docs/BENCHMARKS.md, session 35).
+    pub refit_by_verdict: bool,
     /// A piece counts as a copy only when its pose's verification fit is at
     /// least this (besides passing): a piece that still holds parts of two
     /// copies gets a pose between them that passes on its neighbours'
@@ -229,6 +244,7 @@ impl RecutConfig {
         max_pieces: MAX_CUT_PIECES,
         poses: RecutPoses::Any,
         refit: true,
+        refit_by_verdict: false,
         min_piece_fit: 0.0,
     };
 
@@ -566,9 +582,11 @@ impl Recut {
 
     /// Gives each pixel with depth of each cut region to the piece whose
     /// posed bounding box holds its point, or lies nearest to it (inside
-    /// several: the one whose box centre is nearest, in box half-sizes).
-    /// Pieces without a pose take no pixels; a region with fewer than two
-    /// posed pieces is left as cut. Returns how many pixels changed piece.
+    /// several: the one whose box centre is nearest, in box half-sizes; with
+    /// [`RecutConfig::refit_by_verdict`], the best-verified one that holds
+    /// it within [`REFIT_HOLD_M`]). Pieces without a pose take no pixels; a
+    /// region with fewer than two posed pieces is left as cut. Returns how
+    /// many pixels changed piece.
     fn refit(&mut self, frame: &FrameView<'_>) -> usize {
         let w = frame.width();
         let mut changed = 0;
@@ -587,6 +605,23 @@ impl Recut {
             if placed.iter().flatten().count() < 2 {
                 continue;
             }
+            // The posed pieces, best verdict first (for `refit_by_verdict`).
+            let mut order = [0usize; MAX_CUT_PIECES];
+            let mut posed = 0;
+            for (k, slot) in placed.iter().enumerate() {
+                if slot.is_some() {
+                    order[posed] = k;
+                    posed += 1;
+                }
+            }
+            let verdict = |k: usize| {
+                self.piece_pose(j, k).map_or((false, 0.0), |a| (self.verdicts[a].passed, self.verdicts[a].fit))
+            };
+            order[..posed].sort_unstable_by(|&a, &b| {
+                let (va, vb) = (verdict(a), verdict(b));
+                vb.0.cmp(&va.0).then(vb.1.total_cmp(&va.1))
+            });
+            let by_verdict = self.config.refit_by_verdict;
             let [u0, v0, u1, v1] = self.written[j].map(|x| x as usize);
             let first = c.base + 1;
             let last = c.base + c.pieces as u16;
@@ -606,12 +641,18 @@ impl Recut {
                         }
                         (outside, centre)
                     };
-                    let best = placed
-                        .iter()
-                        .enumerate()
-                        .filter_map(|(k, slot)| slot.as_ref().map(|s| (k, score(s))))
-                        .min_by(|a, b| a.1.0.total_cmp(&b.1.0).then(a.1.1.total_cmp(&b.1.1)));
-                    if let Some((k, _)) = best {
+                    let holds =
+                        |k: &usize| placed[*k].as_ref().is_some_and(|s| score(s).0 <= REFIT_HOLD_M * REFIT_HOLD_M);
+                    let held = if by_verdict { order[..posed].iter().copied().find(holds) } else { None };
+                    let best = held.or_else(|| {
+                        placed
+                            .iter()
+                            .enumerate()
+                            .filter_map(|(k, slot)| slot.as_ref().map(|s| (k, score(s))))
+                            .min_by(|a, b| a.1.0.total_cmp(&b.1.0).then(a.1.1.total_cmp(&b.1.1)))
+                            .map(|(k, _)| k)
+                    });
+                    if let Some(k) = best {
                         let new = first + k as u16;
                         if new != id {
                             self.ids[p] = new;

@@ -512,6 +512,60 @@ fn refitting_the_cut_to_the_pieces_poses_separates_touching_l_blocks() {
     }
 }
 
+/// The network's behaviour on tune_pairs (docs/BENCHMARKS.md, session 35):
+/// a piece holding nine tenths or more of one copy's points (by the copies'
+/// true boxes, within 2 mm) is posed exactly as that copy; a piece holding
+/// parts of two gets a pose between them.
+fn mixing(truths: [Pose; 2]) -> impl Estimator {
+    let l = l_block();
+    let (lo, hi) = l.bounds();
+    common::PoseEach(move |_: &fusepose_estimator::Instance, points: &[[f32; 3]]| {
+        let holds = |t: &Pose, p: &[f32; 3]| {
+            let q = t.inverse_transform_point(&nalgebra::Point3::new(p[0] as f64, p[1] as f64, p[2] as f64));
+            (0..3).all(|a| q[a] > lo[a] - 0.002 && q[a] < hi[a] + 0.002)
+        };
+        let share = |t: &Pose| points.iter().filter(|p| holds(t, p)).count() as f64 / points.len().max(1) as f64;
+        match truths.iter().find(|t| share(t) >= 0.9) {
+            Some(t) => *t,
+            None => {
+                let mid = (truths[0].translation.vector + truths[1].translation.vector) / 2.0;
+                Pose::from_parts(Translation3::from(mid), truths[0].rotation)
+            }
+        }
+    })
+}
+
+#[test]
+fn refitting_by_verdict_gives_the_pixels_a_well_posed_copy_holds_to_it_first() {
+    // The votes cut a pair of L blocks a quarter into the right block: the
+    // left piece holds parts of both and is posed between them, the right
+    // one is posed exactly. By nearest box centre the right block's pixels
+    // stay split between the two poses and the left piece never comes
+    // clean; by verdict they go first to the better-verified pose's box, so
+    // the left piece loses them and is posed exactly in turn.
+    let l = l_block();
+    let truths = [pose(10.0, [-0.04, 0.0, 0.5]), pose(10.0, [0.04, 0.0, 0.5])];
+    let frame = pair(&l);
+    let boundary = |u: usize, _: usize| {
+        let k = common::intrinsics();
+        centre_cell(if (u as f64) < k.fx * 0.02 / 0.5 + k.cx { -0.04 } else { 0.04 })
+    };
+    let nearest = RecutConfig { proposal: CutProposal::VotesOnly, refit: true, ..RecutConfig::DEFAULT };
+    let out = second_look_voted(&frame.view(), nearest, &mut mixing(truths), Some(Votes(boundary)), None);
+    assert_eq!((out.before, out.stats.tried, out.stats.by_votes), (1, 1, 1), "one region, cut along the votes");
+    assert_eq!(out.stats.kept, 0, "by nearest box the left piece stays mixed, posed between the blocks");
+    let by_verdict = RecutConfig { refit_by_verdict: true, ..nearest };
+    let out = second_look_voted(&frame.view(), by_verdict, &mut mixing(truths), Some(Votes(boundary)), None);
+    assert_eq!((out.before, out.stats.tried, out.stats.by_votes), (1, 1, 1), "one region, cut along the votes");
+    assert_eq!(out.stats.kept, 1, "the cut stands once each piece holds one block; refused: {:?}", out.stats.refused);
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    assert_eq!(xs.len(), 2, "poses at {xs:.3?}");
+    for (x, truth) in xs.iter().zip([-0.04, 0.04]) {
+        assert!((x - truth).abs() < 1e-6, "a pose {x:.3} m across, its block at {truth} m");
+    }
+}
+
 /// The poses' x, checked against the blocks' `truths` (sorted).
 fn assert_across(stream: &Stream, truths: &[f64]) {
     let xs = stream.xs();

@@ -41,6 +41,19 @@ pub fn step_block() -> BoxObject {
 }
 
 impl BoxObject {
+    /// The object's bounding box (min, max corners), object frame.
+    pub fn bounds(&self) -> ([f64; 3], [f64; 3]) {
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for (a, b) in &self.boxes {
+            for k in 0..3 {
+                lo[k] = lo[k].min(a[k]);
+                hi[k] = hi[k].max(b[k]);
+            }
+        }
+        (lo, hi)
+    }
+
     fn inside_other(&self, p: &Vector3<f64>, skip: usize) -> bool {
         self.boxes
             .iter()
