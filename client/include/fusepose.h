@@ -69,7 +69,7 @@ extern "C" {
 /* fp_object_pose.flags bits (the others are 0) */
 #define FUSEPOSE_POSE_VERIFIED (1u << 0)              /* passed verification (scores are NaN when it did not run) */
 #define FUSEPOSE_POSE_FROM_INSTANCE_LABELS (1u << 1)  /* mask from the frame's own instance-label plane */
-#define FUSEPOSE_POSE_CONFIRMED (1u << 2)             /* a pose of its class lay near it in the previous frame */
+#define FUSEPOSE_POSE_CONFIRMED (1u << 2)             /* a pose of its class lay near it in the last frame that looked at the class */
 
 /* Cell poses: most objects per message, most views listed per object. */
 #define FUSEPOSE_MAX_CELL_OBJECTS 64

@@ -55,8 +55,10 @@ impl PoseFlags {
     /// (label format 3), not from class labels or the built-in segmenter.
     pub const FROM_INSTANCE_LABELS: u16 = 1 << 1;
     /// A pose of the same class lay within `estimator.confirm_within_m`
-    /// (default 1 cm) of this one in the camera's previous processed frame,
-    /// in the camera frame: the pose was seen twice in a row.
+    /// (default 1 cm) of this one in the camera's previous processed frame
+    /// that looked at its class (frames that shed an instance of the class
+    /// to keep their deadline are skipped), in the camera frame: the pose
+    /// was seen twice in a row.
     pub const CONFIRMED: u16 = 1 << 2;
 }
 

@@ -173,13 +173,13 @@ impl CameraState {
             last_message: PoseMessage::default(),
             busy_ns: 0,
             stable_ids: None,
-            confirmations: Confirmations::new(crate::config::DEFAULT_CONFIRM_WITHIN_M, 1),
+            confirmations: Confirmations::new(crate::config::DEFAULT_CONFIRM_WITHIN_M, 1, label_classes),
         }
     }
 
     /// How near (metres; 0 = never) a pose of how many of the last frames confirms one.
     pub fn set_confirmation(&mut self, within_m: f64, frames: u32) {
-        self.confirmations = Confirmations::new(within_m, frames);
+        self.confirmations = Confirmations::new(within_m, frames, self.label_classes);
     }
 
     /// Publishes instance ids that stay with their object (tracking mode); `None`: per-frame indices.
@@ -366,7 +366,8 @@ impl CameraState {
                 if let Some(ids) = self.stable_ids.as_mut() {
                     ids.assign(&mut msg.objects[..finite]);
                 }
-                self.confirmations.mark(&mut msg.objects[..finite]);
+                let engine = &self.engine;
+                self.confirmations.mark(&mut msg.objects[..finite], |class_id| engine.class_shed(class_id));
                 msg.object_count = finite as u16;
                 msg.status = PoseStatus::OK;
                 if self.engine.degraded() {

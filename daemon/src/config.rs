@@ -310,12 +310,15 @@ pub struct EstimatorConfig {
     pub remask_rounds: usize,
     /// A published pose gets `PoseFlags::CONFIRMED` when a pose of its class
     /// lay within this distance of it in the camera's previous processed
-    /// frame (metres, camera frame; 0 = never set) (`crate::confirm`).
+    /// frame that looked at the class (one that shed an instance of it to
+    /// keep its deadline does not count) (metres, camera frame; 0 = never
+    /// set) (`crate::confirm`).
     pub confirm_within_m: f64,
     /// `confirm_within_m`: in how many of the camera's last processed frames
-    /// (1 = the previous one; up to 24): more bridges frames where the
-    /// daemon shed the object to keep its deadline, but confirms more poses
-    /// that lie between copies.
+    /// that looked at the class (1 = the last one; up to 24; frames that
+    /// shed the class are skipped, 24 frames back at most): more bridges
+    /// frames where the object was missed, but confirms more poses that lie
+    /// between copies.
     pub confirm_frames: u32,
     /// Built-in segmenter: how its cell labels become frame labels: `refine:N`
     /// (pixel borders from interpolated scores, N pixels eroded), `erode-cells`

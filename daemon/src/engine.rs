@@ -1011,6 +1011,12 @@ impl PoseEngine {
         self.estimator.as_ref().map_or(0, |e| e.shed())
     }
 
+    /// Whether the last frame's deadline left an instance of class
+    /// `class_id` without a pose.
+    pub fn class_shed(&self, class_id: u16) -> bool {
+        self.estimator.as_ref().is_some_and(|e| e.shed_class(class_id))
+    }
+
     /// Instances found in the last frame but not estimated (beyond capacity).
     pub fn instances_found(&self) -> usize {
         self.workspace.as_ref().map_or(0, |w| w.instances.len())

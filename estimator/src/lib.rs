@@ -63,6 +63,13 @@ pub trait Estimator: Send {
         0
     }
 
+    /// Whether the last [`Estimator::estimate`] shed an instance of class
+    /// `class_id` ([`Estimator::shed`]): its absence from the poses says
+    /// nothing about the object.
+    fn shed_class(&self, _class_id: u16) -> bool {
+        false
+    }
+
     /// Whether the last [`Estimator::estimate`] gave up accuracy to meet its deadline.
     fn degraded(&self) -> bool {
         false

@@ -64,6 +64,15 @@ fn refiner_iterations_and_points_follow_the_deadline() {
         if frame_no == 0 {
             assert_eq!(p.instance_id, 0, "the largest goes first");
         }
+        // The classes shed are those of the instances left without a pose.
+        for (i, inst) in ws.instances.iter().enumerate() {
+            let copies_posed = ws
+                .instances
+                .iter()
+                .enumerate()
+                .all(|(j, o)| o.class_id != inst.class_id || j == usize::from(p.instance_id));
+            assert_eq!(net.shed_class(inst.class_id), !copies_posed, "instance {i} of class {}", inst.class_id);
+        }
         posed.push(p.instance_id);
     }
     posed.sort_unstable();
@@ -77,6 +86,7 @@ fn refiner_iterations_and_points_follow_the_deadline() {
     assert!(!net.degraded());
     assert_eq!(net.last_plan().points, full_points);
     assert_eq!(net.last_shed(), 0);
+    assert!(ws.instances.iter().all(|i| !net.shed_class(i.class_id)), "nothing shed, no class shed");
     let c = net.counters();
     let found = found as u64;
     assert_eq!((c.objects, c.degraded_frames, c.reduced_point_objects), (3 * found, found, found));

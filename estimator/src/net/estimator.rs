@@ -534,6 +534,8 @@ pub struct NetEstimator {
     last_plan: FramePlan,
     last_degraded: bool,
     last_shed: usize,
+    /// Per class id (0 unused): whether the last frame shed an instance of it.
+    shed_classes: Vec<bool>,
     tracks: Option<Tracks>,
     fit: Option<Arc<FitCheck>>,
     priors: Vec<Option<Prior>>,
@@ -558,6 +560,7 @@ impl NetEstimator {
         let c = &engine.config;
         let (n, s, cap) = (c.num_points, c.crop_size, 8);
         let shed_order = ShedOrder::new(c.num_classes, cap);
+        let shed_classes = vec![false; c.num_classes + 1];
         let scratch = Scratch::new(c, n, s);
         let refine_iterations = options.refine_iterations.unwrap_or(c.refine_iters);
         let fit = options.tracking.map(|_| Arc::new(FitCheck::new(objects)));
@@ -581,6 +584,7 @@ impl NetEstimator {
             last_plan: FramePlan::full(refine_iterations, n),
             last_degraded: false,
             last_shed: 0,
+            shed_classes,
             tracks,
             fit,
             priors: Vec::with_capacity(cap),
@@ -612,6 +616,7 @@ impl NetEstimator {
             last_plan: FramePlan::full(self.refine_iterations, n),
             last_degraded: false,
             last_shed: 0,
+            shed_classes: vec![false; c.num_classes + 1],
             tracks: self.tracks.as_ref().map(|t| Tracks::new(*t.config(), c.num_classes)),
             fit: self.fit.clone(),
             priors: Vec::with_capacity(cap),
@@ -677,6 +682,12 @@ impl NetEstimator {
     /// Instances the last frame left without a pose for lack of time.
     pub fn last_shed(&self) -> usize {
         self.last_shed
+    }
+
+    /// Whether the last frame left an instance of class `class_id` without
+    /// a pose for lack of time.
+    pub fn last_shed_class(&self, class_id: u16) -> bool {
+        self.shed_classes.get(usize::from(class_id)).copied().unwrap_or(false)
     }
 
     /// The learned per-object stage costs.
@@ -745,7 +756,14 @@ impl NetEstimator {
             });
         }
         let poses = out.as_slice();
-        self.shed_order.finish(class_of, found, |i| poses.iter().any(|p| usize::from(p.instance_id) == i));
+        let posed = |i: usize| poses.iter().any(|p| usize::from(p.instance_id) == i);
+        self.shed_classes.fill(false);
+        for i in (0..found).filter(|&i| !posed(i)) {
+            if let Some(shed) = self.shed_classes.get_mut(usize::from(ws.instances[i].class_id)) {
+                *shed = true;
+            }
+        }
+        self.shed_order.finish(class_of, found, posed);
     }
 
     /// Folds one frame's results into the costs, counters and tracks; writes
@@ -791,8 +809,13 @@ impl Estimator for NetEstimator {
         self.last_shed
     }
 
+    fn shed_class(&self, class_id: u16) -> bool {
+        self.last_shed_class(class_id)
+    }
+
     fn estimate(&mut self, _frame: &FrameView<'_>, ws: &mut Workspace, out: &mut PoseSet) -> Result<(), EstimateError> {
         out.clear();
+        self.shed_classes.fill(false);
         let max_iterations = self.frame_cap.take().map_or(self.refine_iterations, |c| c.min(self.refine_iterations));
         let deadline = self.deadline;
         let k_max = self.engine.config.num_classes;
