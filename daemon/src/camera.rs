@@ -363,10 +363,10 @@ impl CameraState {
                     finite += 1;
                 }
                 let non_finite = poses.iter().filter(|p| !pose_is_finite(p)).count();
-                if let Some(ids) = self.stable_ids.as_mut() {
-                    ids.assign(&mut msg.objects[..finite]);
-                }
                 let engine = &self.engine;
+                if let Some(ids) = self.stable_ids.as_mut() {
+                    ids.assign(&mut msg.objects[..finite], |class_id| engine.class_shed(class_id));
+                }
                 self.confirmations.mark(&mut msg.objects[..finite], |class_id| engine.class_shed(class_id));
                 msg.object_count = finite as u16;
                 msg.status = PoseStatus::OK;
