@@ -50,6 +50,12 @@ pub struct AccuracyCounts {
     pub stray: u64,
     #[serde(default)]
     pub stray_confirmed: u64,
+    /// A found true object whose pose, the last time one found it, had the
+    /// same `instance_id` (tracking mode's stable ids), or another.
+    #[serde(default)]
+    pub id_kept: u64,
+    #[serde(default)]
+    pub id_switched: u64,
 }
 
 impl AccuracyCounts {
@@ -87,8 +93,16 @@ impl Truths {
         Ok(Self { video, set, metrics })
     }
 
-    /// Scores the poses of the message for frame `sequence` into `counts`.
-    pub fn score(&self, sequence: u64, poses: &[WireObjectPose], counts: &mut AccuracyCounts) {
+    /// Scores the poses of the message for frame `sequence` into `counts`;
+    /// `last_ids[j]`: the `instance_id` of the last pose that found true
+    /// object `j` (the video's objects, in the messages' order).
+    pub fn score(
+        &self,
+        sequence: u64,
+        poses: &[WireObjectPose],
+        counts: &mut AccuracyCounts,
+        last_ids: &mut Vec<Option<u16>>,
+    ) {
         let frame = &self.video.frames[video::ping_pong(sequence as usize, self.video.frames.len())];
         counts.messages += 1;
         counts.poses += poses.len() as u64;
@@ -119,6 +133,15 @@ impl Truths {
         for (_, i, j, right) in pairs {
             if !pose_taken[i] && !truth_taken[j] {
                 (pose_taken[i], truth_taken[j]) = (true, true);
+                if last_ids.len() <= j {
+                    last_ids.resize(j + 1, None);
+                }
+                let id = poses[i].instance_id;
+                match last_ids[j].replace(id) {
+                    Some(last) if last == id => counts.id_kept += 1,
+                    Some(_) => counts.id_switched += 1,
+                    None => {}
+                }
                 let visible = frame.visible[j] >= MIN_VISIBLE;
                 counts.found += visible as u64;
                 counts.right += (visible && right) as u64;
@@ -162,7 +185,7 @@ mod tests {
         let frame = &truths.video.frames[0];
         let exact: Vec<WireObjectPose> = frame.truth.iter().map(|(c, p)| wire(*c, p)).collect();
         let mut counts = AccuracyCounts::default();
-        truths.score(0, &exact, &mut counts);
+        truths.score(0, &exact, &mut counts, &mut Vec::new());
         let visible = frame.visible.iter().filter(|&&v| v >= MIN_VISIBLE).count() as u64;
         let all = AccuracyCounts {
             messages: 1,
@@ -175,8 +198,20 @@ mod tests {
             wrong_confirmed: 0,
             stray: 0,
             stray_confirmed: 0,
+            id_kept: 0,
+            id_switched: 0,
         };
         assert_eq!(counts, all);
+        // The same objects found again: their ids kept, or one switched.
+        let mut last_ids = Vec::new();
+        let mut counts = AccuracyCounts::default();
+        truths.score(0, &exact, &mut counts, &mut last_ids);
+        let mut again = exact.clone();
+        truths.score(0, &again, &mut counts, &mut last_ids);
+        assert_eq!((counts.id_kept, counts.id_switched), (exact.len() as u64, 0));
+        again[0].instance_id = 7;
+        truths.score(0, &again, &mut counts, &mut last_ids);
+        assert_eq!((counts.id_kept, counts.id_switched), (2 * exact.len() as u64 - 1, 1));
         // The first object 20 cm off, and the second posed twice: both extra poses are wrong.
         // The first and the extra one carry CONFIRMED, as does one right pose.
         let mut off = exact.clone();
@@ -186,7 +221,7 @@ mod tests {
             off[i].flags |= fusepose_client::PoseFlags::CONFIRMED;
         }
         let mut counts = AccuracyCounts::default();
-        truths.score(0, &off, &mut counts);
+        truths.score(0, &off, &mut counts, &mut Vec::new());
         assert_eq!(counts.wrong, 2, "{counts:?}");
         assert_eq!((counts.confirmed, counts.wrong_confirmed), (3, 2), "{counts:?}");
         // The second pose of a found object is wrong, not stray: it lies on an object.
@@ -199,13 +234,13 @@ mod tests {
         let turned = frame.truth[b].1 * UnitQuaternion::from_scaled_axis(Vector3::z() * std::f64::consts::PI);
         flipped[b] = wire(frame.truth[b].0, &turned);
         let mut counts = AccuracyCounts::default();
-        truths.score(0, &flipped, &mut counts);
+        truths.score(0, &flipped, &mut counts, &mut Vec::new());
         let seen = (frame.visible[b] >= MIN_VISIBLE) as u64;
         assert_eq!((counts.found, counts.right, counts.wrong), (visible, visible - seen, 0), "{counts:?}");
         // Sequence 3 of a 2-frame video plays frame 1 (ping-pong).
         let mut counts = AccuracyCounts::default();
         let second: Vec<WireObjectPose> = truths.video.frames[1].truth.iter().map(|(c, p)| wire(*c, p)).collect();
-        truths.score(3, &second, &mut counts);
+        truths.score(3, &second, &mut counts, &mut Vec::new());
         assert_eq!(counts.wrong, 0);
     }
 }

@@ -485,7 +485,7 @@ pub fn render(r: &E2eReport) -> String {
         ));
         if let Some(a) = &x.counts.accuracy {
             s.push_str(&format!(
-                "{} {} fps: of {} true objects >= {:.0} % visible, {} found ({:.1} %: ADD-S < {:.0} % of the diameter), {} right by ADD(S) too ({:.1} %); wrong poses {} ({:.2} per message) of {} received, {} of them stray (near no object of their class); confirmed poses {}, {} of them wrong, {} stray\n",
+                "{} {} fps: of {} true objects >= {:.0} % visible, {} found ({:.1} %: ADD-S < {:.0} % of the diameter), {} right by ADD(S) too ({:.1} %); wrong poses {} ({:.2} per message) of {} received, {} of them stray (near no object of their class); confirmed poses {}, {} of them wrong, {} stray; instance ids of found objects: {} kept, {} switched\n",
                 x.camera,
                 x.fps,
                 a.visible,
@@ -501,7 +501,9 @@ pub fn render(r: &E2eReport) -> String {
                 a.stray,
                 a.confirmed,
                 a.wrong_confirmed,
-                a.stray_confirmed
+                a.stray_confirmed,
+                a.id_kept,
+                a.id_switched
             ));
         }
     }

@@ -202,8 +202,9 @@ pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
     }
     counts.span_s = first.map_or(0.0, |f| (last - f) as f64 / 1e9);
     if let Some(t) = &truths {
+        let mut last_ids = Vec::new();
         for (sequence, poses) in &received {
-            t.score(*sequence, poses, &mut accuracy);
+            t.score(*sequence, poses, &mut accuracy, &mut last_ids);
         }
     }
     counts.accuracy = truths.map(|_| accuracy);
