@@ -614,14 +614,16 @@ impl Recut {
                     posed += 1;
                 }
             }
-            let verdict = |k: usize| {
-                self.piece_pose(j, k).map_or((false, 0.0), |a| (self.verdicts[a].passed, self.verdicts[a].fit))
-            };
-            order[..posed].sort_unstable_by(|&a, &b| {
-                let (va, vb) = (verdict(a), verdict(b));
-                vb.0.cmp(&va.0).then(vb.1.total_cmp(&va.1))
-            });
             let by_verdict = self.config.refit_by_verdict;
+            if by_verdict {
+                let verdict = |k: usize| {
+                    self.piece_pose(j, k).map_or((false, 0.0), |a| (self.verdicts[a].passed, self.verdicts[a].fit))
+                };
+                order[..posed].sort_unstable_by(|&a, &b| {
+                    let (va, vb) = (verdict(a), verdict(b));
+                    vb.0.cmp(&va.0).then(vb.1.total_cmp(&va.1))
+                });
+            }
             let [u0, v0, u1, v1] = self.written[j].map(|x| x as usize);
             let first = c.base + 1;
             let last = c.base + c.pieces as u16;

@@ -12,7 +12,7 @@ use common::{PoseEach, l_block, left_part, object_set, painted, partial, render}
 use fusepose_estimator::remask::{Remask, RemaskConfig, RemaskStats};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
-use fusepose_estimator::{Estimator, FrameView, LabelPlane, ObjectPose, PoseSet, Workspace, WorkspaceConfig};
+use fusepose_estimator::{Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig};
 use fusepose_scene::Pose;
 use nalgebra::{Translation3, UnitQuaternion, Vector3};
 
@@ -120,50 +120,31 @@ fn an_instance_plane_is_left_to_its_producer() {
 /// `object_pixels` at the truth with confidence `whole`, else 4° off about
 /// the camera's axis (a pose that passes verification) with confidence
 /// `part`: the network on a region that lost part of its object.
-struct Doubting {
-    object_pixels: u32,
-    part: f32,
-    whole: f32,
-}
-
-impl Estimator for Doubting {
-    fn name(&self) -> &str {
-        "doubting"
-    }
-
-    fn estimate(
-        &mut self,
-        _frame: &FrameView<'_>,
-        ws: &mut Workspace,
-        out: &mut PoseSet,
-    ) -> Result<(), fusepose_estimator::EstimateError> {
-        out.clear();
-        for (i, inst) in ws.instances.iter().enumerate() {
-            let whole = inst.pixels as f64 >= 0.7 * self.object_pixels as f64;
-            let turn = UnitQuaternion::from_scaled_axis(Vector3::z() * if whole { 0.0 } else { 4f64.to_radians() });
-            out.push(ObjectPose {
-                class_id: inst.class_id,
-                instance_id: i as u16,
-                rotation: turn * truth().rotation,
-                translation: truth().translation.vector,
-                confidence: if whole { self.whole } else { self.part },
-                mask_pixels: inst.pixels,
-                bbox: inst.bbox,
-                iterations: 0,
-            });
-        }
-        Ok(())
-    }
+fn doubting(object_pixels: u32, part: f32, whole: f32) -> impl Estimator {
+    PoseEach(move |inst: &fusepose_estimator::Instance, _: &[[f32; 3]]| {
+        let whole_seen = inst.pixels as f64 >= 0.7 * object_pixels as f64;
+        let turn = UnitQuaternion::from_scaled_axis(Vector3::z() * if whole_seen { 0.0 } else { 4f64.to_radians() });
+        let pose = Pose::from_parts(truth().translation, turn * truth().rotation);
+        (pose, if whole_seen { whole } else { part })
+    })
 }
 
 const DOUBTED: RemaskConfig = RemaskConfig { max_confidence: 0.8, ..RemaskConfig::DEFAULT };
 
+/// The left part of an L block, posed by [`doubting`] with confidences
+/// `part` and `whole`, verified and given second masks under [`DOUBTED`];
+/// the first pose (4° off) passes.
+fn doubted(part: f32, whole: f32) -> Outcome {
+    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
+    let out =
+        second_mask_with(&frame.view(), &mut doubting(object_pixels, part, whole), DEFAULT_SUPPORT_FLOOR_M, DOUBTED);
+    assert!(out.before[0].passed, "the pose 4° off passes: {:?}", out.before[0]);
+    out
+}
+
 #[test]
 fn a_pose_the_network_doubted_is_replaced_by_one_it_is_surer_of() {
-    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
-    let mut net = Doubting { object_pixels, part: 0.5, whole: 0.9 };
-    let out = second_mask_with(&frame.view(), &mut net, DEFAULT_SUPPORT_FLOOR_M, DOUBTED);
-    assert!(out.before[0].passed, "the pose 4° off passes: {:?}", out.before[0]);
+    let out = doubted(0.5, 0.9);
     assert_eq!((out.stats.tried, out.stats.doubted_tried, out.stats.doubted_kept), (0, 1, 1), "{:?}", out.stats);
     let p = out.poses.as_slice()[0];
     assert!(p.rotation.angle_to(&truth().rotation) < 1e-9, "the second mask's pose is the truth");
@@ -175,10 +156,7 @@ fn a_pose_the_network_doubted_is_replaced_by_one_it_is_surer_of() {
 
 #[test]
 fn a_doubted_pose_stays_when_the_network_is_no_surer_of_its_successor() {
-    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
-    let mut net = Doubting { object_pixels, part: 0.5, whole: 0.45 };
-    let out = second_mask_with(&frame.view(), &mut net, DEFAULT_SUPPORT_FLOOR_M, DOUBTED);
-    assert!(out.before[0].passed);
+    let out = doubted(0.5, 0.45);
     assert_eq!((out.stats.doubted_tried, out.stats.doubted_kept), (1, 0), "{:?}", out.stats);
     let p = out.poses.as_slice()[0];
     assert!((p.rotation.angle_to(&truth().rotation) - 4f64.to_radians()).abs() < 1e-9, "the first pose stays");
@@ -192,9 +170,6 @@ fn a_doubted_pose_stays_when_the_network_is_no_surer_of_its_successor() {
 
 #[test]
 fn a_pose_the_network_is_sure_of_gets_no_second_mask() {
-    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
-    let mut net = Doubting { object_pixels, part: 0.85, whole: 0.99 };
-    let out = second_mask_with(&frame.view(), &mut net, DEFAULT_SUPPORT_FLOOR_M, DOUBTED);
-    assert!(out.before[0].passed);
+    let out = doubted(0.85, 0.99);
     assert_eq!(out.stats, RemaskStats::default(), "confidence 0.85 is above the 0.8 limit");
 }

@@ -757,7 +757,6 @@ impl NetEstimator {
         }
         let poses = out.as_slice();
         let posed = |i: usize| poses.iter().any(|p| usize::from(p.instance_id) == i);
-        self.shed_classes.fill(false);
         for i in (0..found).filter(|&i| !posed(i)) {
             if let Some(shed) = self.shed_classes.get_mut(usize::from(ws.instances[i].class_id)) {
                 *shed = true;

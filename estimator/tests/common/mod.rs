@@ -249,12 +249,32 @@ pub fn seg_weight_bytes(cfg: &SegConfig, set: &ObjectSet) -> Vec<u8> {
 pub const OFF_M: f64 = 0.015;
 
 /// A test estimator that poses each prepared instance where `pose_of` says,
-/// from the instance and its distinct sampled points (camera frame).
+/// from the instance and its distinct sampled points (camera frame): a
+/// [`Pose`] (confidence 1), or a pose with the network's confidence.
 pub struct PoseEach<F>(pub F);
 
-impl<F> Estimator for PoseEach<F>
+/// What a [`PoseEach`] closure gives.
+pub trait Posed {
+    /// The pose and its confidence (0..1).
+    fn posed(self) -> (Pose, f32);
+}
+
+impl Posed for Pose {
+    fn posed(self) -> (Pose, f32) {
+        (self, 1.0)
+    }
+}
+
+impl Posed for (Pose, f32) {
+    fn posed(self) -> (Pose, f32) {
+        self
+    }
+}
+
+impl<F, R> Estimator for PoseEach<F>
 where
-    F: FnMut(&fusepose_estimator::Instance, &[[f32; 3]]) -> Pose + Send,
+    F: FnMut(&fusepose_estimator::Instance, &[[f32; 3]]) -> R + Send,
+    R: Posed,
 {
     fn name(&self) -> &str {
         "pose-each"
@@ -268,13 +288,14 @@ where
     ) -> Result<(), fusepose_estimator::EstimateError> {
         out.clear();
         for (i, inst) in ws.instances.iter().enumerate() {
-            let pose = (self.0)(inst, &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)]);
+            let (pose, confidence) =
+                (self.0)(inst, &ws.instance_points(i)[..inst.distinct_points(ws.config.num_points)]).posed();
             out.push(ObjectPose {
                 class_id: inst.class_id,
                 instance_id: i as u16,
                 rotation: pose.rotation,
                 translation: pose.translation.vector,
-                confidence: 1.0,
+                confidence,
                 mask_pixels: inst.pixels,
                 bbox: inst.bbox,
                 iterations: 0,
