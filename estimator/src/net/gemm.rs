@@ -4,11 +4,13 @@
 //! `out = act(x · W + b)`: the bias is written into `out` first, the GEMM
 //! accumulates onto it, then ReLU runs over the same cache-hot rows.
 //! The GEMM (`C += A · B`, all row-major with unit column stride) uses an
-//! AVX2/FMA register-blocked kernel (6 rows × 16 columns, B streamed from
-//! L1 without packing) when the CPU has it, a scalar loop otherwise; it never
-//! allocates (matrixmultiply allocates a packing buffer per call, which the
-//! per-frame no-allocation rule forbids). Convolutions use im2col into a
-//! caller-provided buffer, then one GEMM.
+//! AVX2/FMA register-blocked kernel (6 rows × 16 columns; each 256-row block
+//! of B packed into a 16 KB stack buffer that stays in L1 while the row tiles
+//! pass over it; the last 1–7 columns through a lane mask) when the CPU has
+//! it, a scalar loop otherwise; it never allocates (matrixmultiply allocates
+//! a packing buffer per call, which the per-frame no-allocation rule
+//! forbids). Convolutions use im2col into a caller-provided buffer, then one
+//! GEMM.
 
 use ndarray::{ArrayView1, ArrayView2, ArrayViewMut2, Axis, ShapeBuilder};
 
@@ -63,6 +65,13 @@ pub fn gemm_acc(a: ArrayView2<f32>, b: ArrayView2<f32>, c: &mut ArrayViewMut2<f3
                 simd::panel::<1>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc);
                 j0 += 8;
             }
+            // The last 1-7 columns (the pose heads have 4, 3 and 1) through
+            // a lane mask: the scalar loop below was 4 % of the estimator's
+            // CPU time on the heads alone.
+            if j0 < n {
+                simd::panel_masked(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc, n - j0);
+                j0 = n;
+            }
         }
         if j0 < n {
             for i in 0..m {
@@ -87,6 +96,9 @@ mod simd {
     /// (256 × 16 × 4 B = 16 KB) stays in L1 while every row tile passes over it.
     const KC: usize = 256;
 
+    /// Rows of A from which a K block of B is packed first (two 6-row tiles and more).
+    const PACK_MIN_ROWS: usize = 12;
+
     /// All rows of a `W*8`-column panel: for each K block, 6-row tiles, then the remainder.
     #[allow(clippy::too_many_arguments)]
     #[target_feature(enable = "avx2,fma")]
@@ -100,23 +112,77 @@ mod simd {
         c: *mut f32,
         ldc: usize,
     ) {
+        unsafe { rows::<W, false>(m, k, a, lda, b, ldb, c, ldc, _mm256_setzero_si256()) }
+    }
+
+    /// All rows of the last `cols` (1-7) columns: B and C are read and
+    /// written through a lane mask, so no element past column `cols` is touched.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2,fma")]
+    pub unsafe fn panel_masked(
+        m: usize,
+        k: usize,
+        a: *const f32,
+        lda: usize,
+        b: *const f32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        cols: usize,
+    ) {
+        debug_assert!((1..8).contains(&cols));
+        let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
+        let mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(cols as i32), lanes);
+        unsafe { rows::<1, true>(m, k, a, lda, b, ldb, c, ldc, mask) }
+    }
+
+    /// [`panel`]'s loop; `MASKED` (with `W = 1`) loads and stores through `mask`.
+    #[allow(clippy::too_many_arguments)]
+    #[target_feature(enable = "avx2,fma")]
+    #[inline]
+    unsafe fn rows<const W: usize, const MASKED: bool>(
+        m: usize,
+        k: usize,
+        a: *const f32,
+        lda: usize,
+        b: *const f32,
+        ldb: usize,
+        c: *mut f32,
+        ldc: usize,
+        mask: __m256i,
+    ) {
+        // The K block of B, copied into consecutive rows when enough row
+        // tiles reuse it: B's own rows are often a multiple of 1 KiB apart
+        // (weights of 256 or 512 outputs), so its 256 lines fell into a few
+        // L1 sets and evicted each other between tiles (256×256×512 ran at
+        // 67 GFLOP/s, 256×384×256 at 91).
+        let pack = !MASKED && m >= PACK_MIN_ROWS;
+        let mut packed = std::mem::MaybeUninit::<[f32; KC * 16]>::uninit();
+        let packed = packed.as_mut_ptr().cast::<f32>();
         unsafe {
             let mut k0 = 0;
             while k0 < k {
                 let kc = KC.min(k - k0);
-                let (a, b) = (a.add(k0), b.add(k0 * ldb));
+                let (a, mut b) = (a.add(k0), b.add(k0 * ldb));
+                let mut ldb = ldb;
+                if pack {
+                    for p in 0..kc {
+                        std::ptr::copy_nonoverlapping(b.add(p * ldb), packed.add(p * W * 8), W * 8);
+                    }
+                    (b, ldb) = (packed.cast_const(), W * 8);
+                }
                 let mut i = 0;
                 while i + 6 <= m {
-                    tile::<6, W>(kc, a.add(i * lda), lda, b, ldb, c.add(i * ldc), ldc);
+                    tile::<6, W, MASKED>(kc, a.add(i * lda), lda, b, ldb, c.add(i * ldc), ldc, mask);
                     i += 6;
                 }
                 let (ar, cr) = (a.add(i * lda), c.add(i * ldc));
                 match m - i {
-                    5 => tile::<5, W>(kc, ar, lda, b, ldb, cr, ldc),
-                    4 => tile::<4, W>(kc, ar, lda, b, ldb, cr, ldc),
-                    3 => tile::<3, W>(kc, ar, lda, b, ldb, cr, ldc),
-                    2 => tile::<2, W>(kc, ar, lda, b, ldb, cr, ldc),
-                    1 => tile::<1, W>(kc, ar, lda, b, ldb, cr, ldc),
+                    5 => tile::<5, W, MASKED>(kc, ar, lda, b, ldb, cr, ldc, mask),
+                    4 => tile::<4, W, MASKED>(kc, ar, lda, b, ldb, cr, ldc, mask),
+                    3 => tile::<3, W, MASKED>(kc, ar, lda, b, ldb, cr, ldc, mask),
+                    2 => tile::<2, W, MASKED>(kc, ar, lda, b, ldb, cr, ldc, mask),
+                    1 => tile::<1, W, MASKED>(kc, ar, lda, b, ldb, cr, ldc, mask),
                     _ => {}
                 }
                 k0 += kc;
@@ -128,7 +194,7 @@ mod simd {
     #[allow(clippy::too_many_arguments)]
     #[target_feature(enable = "avx2,fma")]
     #[inline]
-    unsafe fn tile<const R: usize, const W: usize>(
+    unsafe fn tile<const R: usize, const W: usize, const MASKED: bool>(
         k: usize,
         a: *const f32,
         lda: usize,
@@ -136,6 +202,7 @@ mod simd {
         ldb: usize,
         c: *mut f32,
         ldc: usize,
+        mask: __m256i,
     ) {
         unsafe {
             let mut acc = [[_mm256_setzero_ps(); W]; R];
@@ -143,7 +210,7 @@ mod simd {
                 let brow = b.add(p * ldb);
                 let mut bv = [_mm256_setzero_ps(); W];
                 for (w, v) in bv.iter_mut().enumerate() {
-                    *v = _mm256_loadu_ps(brow.add(8 * w));
+                    *v = if MASKED { _mm256_maskload_ps(brow, mask) } else { _mm256_loadu_ps(brow.add(8 * w)) };
                 }
                 for (r, accr) in acc.iter_mut().enumerate() {
                     let av = _mm256_broadcast_ss(&*a.add(r * lda + p));
@@ -156,7 +223,11 @@ mod simd {
                 let crow = c.add(r * ldc);
                 for (w, v) in accr.iter().enumerate() {
                     let p = crow.add(8 * w);
-                    _mm256_storeu_ps(p, _mm256_add_ps(_mm256_loadu_ps(p), *v));
+                    if MASKED {
+                        _mm256_maskstore_ps(p, mask, _mm256_add_ps(_mm256_maskload_ps(p, mask), *v));
+                    } else {
+                        _mm256_storeu_ps(p, _mm256_add_ps(_mm256_loadu_ps(p), *v));
+                    }
                 }
             }
         }
@@ -181,11 +252,6 @@ pub fn dense(
     }
 }
 
-/// A 3x3 convolution with padding 1 and the given stride, channel-major.
-///
-/// `input`: `[C_in, H, W]` flattened; `w`: `[C_out, C_in*9]` (PyTorch `[O, I, 3, 3]` flattened);
-/// `cols`: scratch of at least `C_in*9*Ho*Wo`; `out`: `[C_out, Ho*Wo]`. Bias and ReLU fused.
-#[allow(clippy::too_many_arguments)]
 /// Row stride of the im2col matrix for `hw` output pixels. Rows a multiple
 /// of 1 KiB apart fall into the same L1 sets and the GEMM kernel, walking B
 /// row by row, evicts its own lines: a 32×864×1024 conv ran at 65 GFLOP/s,
@@ -194,11 +260,40 @@ pub fn cols_stride(hw: usize) -> usize {
     if hw >= 256 && (hw * 4).is_multiple_of(1024) { hw + 16 } else { hw }
 }
 
+/// One im2col row: `dst[ox] = src[ox * stride + kx - 1]`, zero where that
+/// falls outside `src` (the padding). The interior is a plain copy at stride 1
+/// and a branch-free gather at stride 2; this loop was an eighth of the
+/// estimator's CPU time when it tested the bounds per element.
+fn im2col_row(src: &[f32], stride: usize, kx: usize, dst: &mut [f32]) {
+    let wo = dst.len();
+    // Valid outputs: ox * stride + kx >= 1 and ox * stride + kx - 1 < src.len().
+    let lo = usize::from(kx == 0).min(wo);
+    let hi = (src.len() + 1 - kx).div_ceil(stride).clamp(lo, wo);
+    dst[..lo].fill(0.0);
+    dst[hi..].fill(0.0);
+    if hi == lo {
+        return;
+    }
+    let start = lo * stride + kx - 1;
+    let dst = &mut dst[lo..hi];
+    if stride == 1 {
+        dst.copy_from_slice(&src[start..start + dst.len()]);
+    } else {
+        for (d, s) in dst.iter_mut().zip(src[start..].iter().step_by(stride)) {
+            *d = *s;
+        }
+    }
+}
+
 /// Length of the im2col buffer [`conv3x3`] needs for `c_in` channels and `hw` output pixels.
 pub fn cols_len(c_in: usize, hw: usize) -> usize {
     c_in * 9 * cols_stride(hw)
 }
 
+/// A 3x3 convolution with padding 1 and the given stride, channel-major.
+///
+/// `input`: `[C_in, H, W]` flattened; `w`: `[C_out, C_in*9]` (PyTorch `[O, I, 3, 3]` flattened);
+/// `cols`: scratch of at least `C_in*9*Ho*Wo`; `out`: `[C_out, Ho*Wo]`. Bias and ReLU fused.
 #[allow(clippy::too_many_arguments)] // the shapes of a preallocated conv call: input, weights, output, dims
 pub fn conv3x3(
     input: &[f32],
@@ -230,10 +325,7 @@ pub fn conv3x3(
                         continue;
                     }
                     let src = &plane[iy as usize * w_in..(iy as usize + 1) * w_in];
-                    for (ox, d) in dst.iter_mut().enumerate() {
-                        let ix = (ox * stride + kx) as isize - 1;
-                        *d = if ix < 0 || ix >= w_in as isize { 0.0 } else { src[ix as usize] };
-                    }
+                    im2col_row(src, stride, kx, dst);
                 }
             }
         }
@@ -263,20 +355,34 @@ mod tests {
 
     #[test]
     fn gemm_matches_naive_for_odd_shapes_and_strided_views() {
-        for &(m, k, n) in &[(1, 1, 1), (7, 5, 3), (13, 27, 40), (6, 64, 16), (257, 33, 25), (5, 9, 8)] {
+        // Column tails of 1-7 (masked), k past one 256-row block, every row remainder.
+        let shapes = [
+            (1, 1, 1),
+            (7, 5, 3),
+            (13, 27, 40),
+            (6, 64, 16),
+            (257, 33, 25),
+            (5, 9, 8),
+            (11, 300, 7),
+            (14, 300, 23),
+            (4, 3, 20),
+        ];
+        for &(m, k, n) in &shapes {
             let a = Array2::from_shape_fn((m, k + 3), |(i, j)| ((i * 31 + j * 7) % 13) as f32 * 0.1 - 0.6);
-            let b = Array2::from_shape_fn((k, n + 2), |(i, j)| ((i * 11 + j * 5) % 17) as f32 * 0.05 - 0.4);
+            let b = Array2::from_shape_fn((k, n + 4), |(i, j)| ((i * 11 + j * 5) % 17) as f32 * 0.05 - 0.4);
             let av = a.slice(s![.., 1..k + 1]);
-            let bv = b.slice(s![.., 2..]);
-            let mut c = Array2::from_elem((m, n + 4), 1.0f32);
-            let mut cv = c.slice_mut(s![.., 4..]);
+            // B's view ends 2 columns short of its rows and C's 4 short: a
+            // masked tail must neither read nor write past its columns.
+            let bv = b.slice(s![.., 2..n + 2]);
+            let mut c = Array2::from_elem((m, n + 8), 1.0f32);
+            let mut cv = c.slice_mut(s![.., 4..n + 4]);
             gemm_acc(av, bv, &mut cv);
             let expect = av.dot(&bv);
             for i in 0..m {
                 for j in 0..n {
                     assert!((c[[i, j + 4]] - 1.0 - expect[[i, j]]).abs() < 1e-4, "{m}x{k}x{n} at {i},{j}");
                 }
-                for j in 0..4 {
+                for j in (0..4).chain(n + 4..n + 8) {
                     assert_eq!(c[[i, j]], 1.0, "untouched columns");
                 }
             }
@@ -286,7 +392,7 @@ mod tests {
     #[test]
     fn conv_matches_direct_sum() {
         // 16×16 at stride 1 has a padded im2col row stride (`cols_stride`).
-        for (c_in, h, wd) in [(2, 5, 4), (2, 16, 16)] {
+        for (c_in, h, wd) in [(2, 5, 4), (2, 16, 16), (1, 1, 1), (1, 2, 3), (3, 7, 5), (1, 4, 2), (2, 3, 1)] {
             conv_case(c_in, h, wd);
         }
     }
@@ -334,11 +440,13 @@ mod speed {
     #[test]
     #[ignore]
     fn gemm_speed() {
-        for &(m, k, n) in &[(256, 256, 512), (256, 384, 256), (32, 864, 1024), (256, 3, 64)] {
+        for &(m, k, n) in
+            &[(256, 256, 512), (256, 384, 256), (256, 64, 128), (32, 864, 1040), (256, 3, 64), (256, 128, 4)]
+        {
             let a = Array2::from_shape_fn((m, k), |(i, j)| ((i + j) % 7) as f32 * 0.1);
             let b = Array2::from_shape_fn((k, n), |(i, j)| ((i * j) % 5) as f32 * 0.1);
             let mut c = Array2::zeros((m, n));
-            let reps = 200;
+            let reps = 400;
             let t = std::time::Instant::now();
             for _ in 0..reps {
                 gemm_acc(a.view(), b.view(), &mut c.view_mut());
