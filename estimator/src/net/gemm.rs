@@ -454,5 +454,22 @@ mod speed {
             let s = t.elapsed().as_secs_f64() / reps as f64;
             println!("{m}x{k}x{n}: {:.3} ms, {:.1} GFLOP/s", s * 1e3, 2.0 * (m * k * n) as f64 / s / 1e9);
         }
+        // The colour branch's convolutions (crop 64): e1, e2, d1.
+        for &(c_in, hw_in, stride, c_out) in &[(3, 64, 1, 16), (16, 64, 2, 32), (96, 32, 1, 32)] {
+            let input: Vec<f32> = (0..c_in * hw_in * hw_in).map(|i| (i % 13) as f32 * 0.1).collect();
+            let weight = Array2::from_shape_fn((c_out, c_in * 9), |(i, j)| ((i + j) % 7) as f32 * 0.01);
+            let bias = ndarray::Array1::zeros(c_out);
+            let ho = (hw_in - 1) / stride + 1;
+            let mut cols = vec![0.0; cols_len(c_in, ho * ho)];
+            let mut out = Array2::zeros((c_out, ho * ho));
+            let reps = 400;
+            let t = std::time::Instant::now();
+            for _ in 0..reps {
+                conv3x3(&input, c_in, hw_in, hw_in, stride, weight.view(), bias.view(), &mut cols, out.view_mut());
+            }
+            let s = t.elapsed().as_secs_f64() / reps as f64;
+            let flops = 2.0 * (c_out * c_in * 9 * ho * ho) as f64;
+            println!("conv {c_in}x{hw_in}x{hw_in}/{stride} -> {c_out}: {:.3} ms, {:.1} GFLOP/s", s * 1e3, flops / s / 1e9);
+        }
     }
 }
