@@ -1,6 +1,7 @@
 //! How right the poses a consumer receives are: each message is scored
 //! against the truth of its frame, the producer's video rendered again from
-//! the same seed (frame sequence → video frame by [`video::ping_pong`]).
+//! the same seed or loaded from the same BOP split (frame sequence → video
+//! frame by [`Video::frame_at`]).
 //! A received pose finds a true object of its class when its ADD-S error
 //! (the surface distance, what a grasp on the object's shape needs) is below
 //! a tenth of the object's diameter, each true object taken once, smallest
@@ -15,7 +16,7 @@ use fusepose_scene::metrics::ObjectMetric;
 use fusepose_scene::{ObjectSet, Pose};
 use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 
-use crate::video::{self, Copies, Video};
+use crate::video::{Source, Video};
 
 /// True objects at least this visible count as ones to find.
 pub const MIN_VISIBLE: f64 = 0.1;
@@ -83,12 +84,11 @@ pub struct Truths {
 }
 
 impl Truths {
-    /// The video of producer argument `objects` (`N[:pair|:heap]`), `seed`
-    /// and `frames`, as the producer renders it.
-    pub fn render(objects: &str, seed: u64, frames: usize) -> anyhow::Result<Self> {
-        let (n, copies): (usize, Copies) = Copies::parse_arg(objects)?;
+    /// The video of producer argument `source` ([`Source::parse_arg`]),
+    /// `seed` and `frames`, as the producer renders or loads it.
+    pub fn load(source: &str, seed: u64, frames: usize) -> anyhow::Result<Self> {
         let set = fusepose_scene::builtin::builtin_objects();
-        let video = video::render_video_with(&set, n, copies, frames, 0.5, seed)?;
+        let video = Source::parse_arg(source)?.load(&set, seed, frames)?;
         let metrics = set.objects.iter().map(ObjectMetric::for_model).collect::<Result<_, _>>()?;
         Ok(Self { video, set, metrics })
     }
@@ -103,7 +103,7 @@ impl Truths {
         counts: &mut AccuracyCounts,
         last_ids: &mut Vec<Option<u16>>,
     ) {
-        let frame = &self.video.frames[video::ping_pong(sequence as usize, self.video.frames.len())];
+        let frame = self.video.frame_at(sequence as usize);
         counts.messages += 1;
         counts.poses += poses.len() as u64;
         counts.visible += frame.visible.iter().filter(|&&v| v >= MIN_VISIBLE).count() as u64;
@@ -181,7 +181,7 @@ mod tests {
 
     #[test]
     fn true_poses_are_found_and_a_shifted_or_second_pose_is_wrong() {
-        let truths = Truths::render("3", 11, 2).unwrap();
+        let truths = Truths::load("3", 11, 2).unwrap();
         let frame = &truths.video.frames[0];
         let exact: Vec<WireObjectPose> = frame.truth.iter().map(|(c, p)| wire(*c, p)).collect();
         let mut counts = AccuracyCounts::default();
@@ -242,5 +242,30 @@ mod tests {
         let second: Vec<WireObjectPose> = truths.video.frames[1].truth.iter().map(|(c, p)| wire(*c, p)).collect();
         truths.score(3, &second, &mut counts, &mut Vec::new());
         assert_eq!(counts.wrong, 0);
+    }
+
+    /// Truths of a BOP split source: the split's true poses are all found
+    /// and right at every step, each image held its steps; one 20 cm off is not.
+    #[test]
+    fn a_bop_split_source_scores_its_own_truth() {
+        let root = std::env::temp_dir().join(format!("fusepose-bench-bop-truths-{}", std::process::id()));
+        let _ = std::fs::remove_dir_all(&root);
+        crate::video::write_test_split(&root, 2);
+        let truths = Truths::load(&format!("bop:2:{}", root.display()), 0, 0).unwrap();
+        for step in 0..5 {
+            let frame = truths.video.frame_at(step);
+            let exact: Vec<WireObjectPose> = frame.truth.iter().map(|(c, p)| wire(*c, p)).collect();
+            let mut counts = AccuracyCounts::default();
+            truths.score(step as u64, &exact, &mut counts, &mut Vec::new());
+            let visible = frame.visible.iter().filter(|&&v| v >= MIN_VISIBLE).count() as u64;
+            assert!(visible > 0);
+            assert_eq!((counts.found, counts.right, counts.wrong), (visible, visible, 0), "step {step}: {counts:?}");
+            let mut off = exact.clone();
+            off[0].translation_m[2] += 0.2;
+            let mut counts = AccuracyCounts::default();
+            truths.score(step as u64, &off, &mut counts, &mut Vec::new());
+            assert_eq!(counts.wrong, 1, "step {step}: {counts:?}");
+        }
+        std::fs::remove_dir_all(&root).ok();
     }
 }

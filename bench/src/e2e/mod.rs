@@ -77,6 +77,17 @@ pub struct E2eArgs {
     /// Distinct rendered frames of the video (played back and forth).
     #[arg(long, default_value_t = 48)]
     pub video_frames: usize,
+    /// Replay the `test` split of this BOP dataset instead of a rendered
+    /// video (e.g. a path-traced split of `tools/blender/render_bop_split.py`:
+    /// images fusepose did not render); its frames in order, each held
+    /// `--hold` frames, looping. `--objects-per-frame`, `--pair`, `--heap`,
+    /// `--seed` and `--video-frames` do not apply.
+    #[arg(long, conflicts_with_all = ["pair", "heap"])]
+    pub source: Option<PathBuf>,
+    /// With `--source`: frames each split image is sent for in a row (a still
+    /// camera on each scene; `CONFIRMED` and stable ids need repeats).
+    #[arg(long, default_value_t = 12)]
+    pub hold: usize,
     /// Scene seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
@@ -109,6 +120,8 @@ impl Default for E2eArgs {
             pin: false,
             receive_spin_us: 200,
             video_frames: 48,
+            source: None,
+            hold: 12,
             seed: 7,
             estimator_extra: String::new(),
             smoke: false,
@@ -118,6 +131,14 @@ impl Default for E2eArgs {
 }
 
 impl E2eArgs {
+    /// The producers' video source.
+    pub fn video_source(&self) -> crate::video::Source {
+        match &self.source {
+            Some(root) => crate::video::Source::Bop { root: root.clone(), hold: self.hold.max(1) },
+            None => crate::video::Source::Rendered { objects: self.objects_per_frame, copies: self.copies() },
+        }
+    }
+
     /// The copies of one class in the producers' scenes.
     pub fn copies(&self) -> crate::video::Copies {
         use crate::video::Copies;
@@ -256,8 +277,8 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<Vec<RateResult>> {
     let names = camera_names(args.cameras);
     let files: Vec<PathBuf> = names.iter().map(|n| ns.dir.join(format!("latencies-{n}.txt"))).collect();
     let video_frames = if args.smoke { 4 } else { args.video_frames };
-    let objects = format!("{}{}", args.objects_per_frame, args.copies().suffix());
-    // Each consumer renders its producer's video again to score the poses against its truth.
+    let objects = args.video_source().arg();
+    // Each consumer renders (or loads) its producer's video again to score the poses against its truth.
     let mut consumers = Vec::with_capacity(names.len());
     for (i, (name, file)) in names.iter().zip(&files).enumerate() {
         consumers.push(ChildProcess::spawn(
@@ -410,18 +431,24 @@ pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
 pub fn render(r: &E2eReport) -> String {
     let a = &r.args;
     let mut s = format!(
-        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + {} camera(s), each a producer ({} objects{}, rendered video) + consumer\n",
+        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + {} camera(s), each a producer ({}) + consumer\n",
         a.threads.map_or_else(|| "machine's".to_owned(), |t| t.clamp(1, 2).to_string()),
         a.refine_iterations,
         !a.no_degrade,
         a.tracking,
         a.pin,
         a.cameras,
-        a.objects_per_frame,
-        match a.copies() {
-            crate::video::Copies::None => "",
-            crate::video::Copies::Pair => ", one class twice",
-            crate::video::Copies::Heap => ", one class as a heap",
+        match &a.source {
+            Some(root) => format!("BOP split {}/test, each image held {} frames", root.display(), a.hold.max(1)),
+            None => format!(
+                "{} objects{}, rendered video",
+                a.objects_per_frame,
+                match a.copies() {
+                    crate::video::Copies::None => "",
+                    crate::video::Copies::Pair => ", one class twice",
+                    crate::video::Copies::Heap => ", one class as a heap",
+                }
+            ),
         }
     );
     if let Some(e) = r.rates.first().map(|r| &r.estimator).filter(|e| !e.is_empty()) {

@@ -47,7 +47,7 @@ pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
 pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
     anyhow::ensure!(
         (5..=7).contains(&args.len()),
-        "usage: e2e-producer FPS FRAMES OBJECTS[:pair|:heap] SEED VIDEO_FRAMES [CAMERA [GO_FILE]]"
+        "usage: e2e-producer FPS FRAMES SOURCE SEED VIDEO_FRAMES [CAMERA [GO_FILE]] (SOURCE: OBJECTS[:pair|:heap] or bop:HOLD:DIR)"
     );
     let camera = args.get(5).map_or(CAMERA, String::as_str);
     // With several producers: start sending only once every one has rendered its video.
@@ -55,12 +55,12 @@ pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
     let fps: f64 = args[0].parse()?;
     let frames: u64 = args[1].parse()?;
     // `N:pair` / `N:heap`: N classes, one of them standing twice as a
-    // touching pair, or as a heap of copies.
-    let (objects, copies) = video::Copies::parse_arg(&args[2])?;
+    // touching pair, or as a heap of copies; `bop:HOLD:DIR`: a BOP split.
+    let source = video::Source::parse_arg(&args[2])?;
     let seed: u64 = args[3].parse()?;
     let video_frames: usize = args[4].parse()?;
     let set = fusepose_scene::builtin::builtin_objects();
-    let video = video::render_video_with(&set, objects, copies, video_frames, 0.5, seed)?;
+    let video = source.load(&set, seed, video_frames)?;
     let k = video.intrinsics;
     let layout = FrameLayout {
         width: k.width,
@@ -83,7 +83,7 @@ pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
     let period = Duration::from_secs_f64(1.0 / fps);
     let t0 = Instant::now();
     for i in 0..frames {
-        let source = &video.frames[video::ping_pong(i as usize, video.frames.len())];
+        let source = video.frame_at(i as usize);
         // Capture time = when the frame is loaned: copying it in counts as latency.
         let mut frame = producer.loan()?;
         frame.set_intrinsics(k.fx, k.fy, k.cx, k.cy);
@@ -131,14 +131,14 @@ pub struct ConsumerCounts {
 pub fn consumer_main(args: &[String]) -> anyhow::Result<()> {
     anyhow::ensure!(
         matches!(args.len(), 3 | 4 | 7),
-        "usage: e2e-consumer FRAMES WARMUP FILE [CAMERA [OBJECTS SEED VIDEO_FRAMES]]"
+        "usage: e2e-consumer FRAMES WARMUP FILE [CAMERA [SOURCE SEED VIDEO_FRAMES]]"
     );
     let frames: u64 = args[0].parse()?;
     let warmup: u64 = args[1].parse()?;
     let camera = args.get(3).map_or(CAMERA, String::as_str);
     let truths = match args.get(4..7) {
-        Some([objects, seed, video_frames]) => {
-            Some(super::accuracy::Truths::render(objects, seed.parse()?, video_frames.parse()?)?)
+        Some([source, seed, video_frames]) => {
+            Some(super::accuracy::Truths::load(source, seed.parse()?, video_frames.parse()?)?)
         }
         _ => None,
     };

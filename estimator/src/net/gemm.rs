@@ -469,7 +469,11 @@ mod speed {
             }
             let s = t.elapsed().as_secs_f64() / reps as f64;
             let flops = 2.0 * (c_out * c_in * 9 * ho * ho) as f64;
-            println!("conv {c_in}x{hw_in}x{hw_in}/{stride} -> {c_out}: {:.3} ms, {:.1} GFLOP/s", s * 1e3, flops / s / 1e9);
+            println!(
+                "conv {c_in}x{hw_in}x{hw_in}/{stride} -> {c_out}: {:.3} ms, {:.1} GFLOP/s",
+                s * 1e3,
+                flops / s / 1e9
+            );
         }
     }
 }
