@@ -280,23 +280,23 @@ pub fn ping_pong(i: usize, len: usize) -> usize {
     if j < len { j } else { period - j }
 }
 
-/// Writes a BOP `test` split of `views` views of one rendered scene under
-/// `root`, as `fusepose render` writes one (for tests); returns each view's
-/// depth (0.1 mm units) and true class ids.
-#[cfg(test)]
-pub(crate) fn write_test_split(root: &Path, views: usize) -> Vec<(Vec<u16>, Vec<u16>)> {
+/// Writes a small BOP `test` split under `root`: `views` views of one
+/// rendered three-object scene of the built-in objects, as `fusepose render`
+/// writes one (for tests and the smoke benchmark of `e2e --source`); returns
+/// each view's depth (0.1 mm units) and true class ids.
+pub fn write_test_split(root: &Path, views: usize) -> anyhow::Result<Vec<(Vec<u16>, Vec<u16>)>> {
     use fusepose_scene::bop::{BopWriter, FrameToWrite, InstanceToWrite, ObjectSource};
     use fusepose_scene::render::DEPTH_U16_PER_METRE;
     use fusepose_scene::sampler::render_view;
     let set = fusepose_scene::builtin::builtin_objects();
     let k = Intrinsics::YCB_VIDEO;
     let cfg = SamplerConfig { min_objects: 3, max_objects: 3, views, ..SamplerConfig::default() };
-    let scene = sample_scene(&set, &cfg, 5).expect("scene");
-    let mut writer = BopWriter::create(root, "test", &set, &ObjectSource::Builtin).expect("writer");
+    let scene = sample_scene(&set, &cfg, 5).map_err(|e| anyhow::anyhow!("scene: {e}"))?;
+    let mut writer = BopWriter::create(root, "test", &set, &ObjectSource::Builtin)?;
     let mut target = RenderTarget::for_intrinsics(&k);
     let mut written = Vec::new();
     for view in 0..views {
-        let truth = render_view(&scene, &set, view, &k, &NoiseConfig::default(), &mut target).expect("render");
+        let truth = render_view(&scene, &set, view, &k, &NoiseConfig::default(), &mut target)?;
         let instances: Vec<InstanceToWrite> = truth
             .objects
             .iter()
@@ -307,21 +307,19 @@ pub(crate) fn write_test_split(root: &Path, views: usize) -> Vec<(Vec<u16>, Vec<
                 px_count_all: Some(o.alone_pixels),
             })
             .collect();
-        writer
-            .write_frame(&FrameToWrite {
-                scene_id: 0,
-                im_id: view as u32,
-                intrinsics: truth.intrinsics,
-                rgb: target.rgb(),
-                depth: target.depth_u16(),
-                depth_unit_m: 1.0 / DEPTH_U16_PER_METRE,
-                instance_labels: target.labels(),
-                instances: &instances,
-            })
-            .expect("write");
+        writer.write_frame(&FrameToWrite {
+            scene_id: 0,
+            im_id: view as u32,
+            intrinsics: truth.intrinsics,
+            rgb: target.rgb(),
+            depth: target.depth_u16(),
+            depth_unit_m: 1.0 / DEPTH_U16_PER_METRE,
+            instance_labels: target.labels(),
+            instances: &instances,
+        })?;
         written.push((target.depth_u16().to_vec(), truth.objects.iter().map(|o| o.class_id).collect()));
     }
-    written
+    Ok(written)
 }
 
 #[cfg(test)]
@@ -335,7 +333,7 @@ mod tests {
     fn a_bop_split_plays_each_image_held_with_its_truth() {
         let root = std::env::temp_dir().join(format!("fusepose-bench-bop-video-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
-        let written = write_test_split(&root, 2);
+        let written = write_test_split(&root, 2).unwrap();
         let set = fusepose_scene::builtin::builtin_objects();
         let source = Source::parse_arg(&format!("bop:3:{}", root.display())).unwrap();
         assert_eq!(source, Source::Bop { root: root.clone(), hold: 3 });

@@ -95,6 +95,44 @@ fn e2e_smoke_poses_frames_through_daemon_and_consumer() {
     let _ = std::fs::remove_dir_all(out);
 }
 
+/// `e2e --source`: the producer replays a BOP split (here a two-image one
+/// written as `fusepose render` writes one), with a colour cast, and the
+/// consumer scores the poses against the split's own truth.
+#[test]
+fn e2e_smoke_replays_a_bop_split_with_a_colour_cast() {
+    let Some(weights) = weights() else { return };
+    let out = out_dir("e2e-bop");
+    let split = out.join("split");
+    fusepose_bench::video::write_test_split(&split, 2).expect("a BOP split");
+    let text = bench(&[
+        "e2e",
+        "--smoke",
+        "--no-degrade",
+        "--fps",
+        "30",
+        "--weights",
+        &weights,
+        "--source",
+        split.to_str().unwrap(),
+        "--hold",
+        "3",
+        "--cast",
+        "dim",
+        "--estimator-extra",
+        "verify = \"flag\"",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    assert!(text.contains("BOP split") && text.contains("colour cast dim"), "{text}");
+    let line = text.lines().find(|l| l.contains("true objects >=")).expect("an accuracy line");
+    let count = |before: &str| -> f64 {
+        line.split(before).next().and_then(|s| s.rsplit(' ').next()).and_then(|s| s.parse().ok()).unwrap()
+    };
+    let (visible, found) = (count(" true objects >="), count(" found ("));
+    assert!(visible > 0.0 && found >= 0.5 * visible, "{line}");
+    let _ = std::fs::remove_dir_all(out);
+}
+
 #[test]
 fn e2e_smoke_serves_two_cameras_and_their_cell() {
     let Some(weights) = weights() else { return };

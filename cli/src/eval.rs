@@ -31,7 +31,6 @@
 //! within 0.1 d, where its pixels went: background, a region of its class or
 //! of another, with or without a published pose.
 
-mod cast;
 mod dataset;
 mod instances;
 mod masks;
@@ -54,6 +53,7 @@ use fusepose_estimator::{
 use fusepose_scene::metrics::{
     BopResult, BopResultsWriter, MetricsRow, MetricsTable, ObjectMetric, plot_accuracy_curves,
 };
+use fusepose_scene::render::cast::Cast;
 use fusepose_scene::{ObjectSet, Pose};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -363,10 +363,18 @@ pub struct Args {
     /// Write a PNG of the ADD-S accuracy–threshold curves.
     #[arg(long)]
     pub plot: Option<PathBuf>,
-    /// Colour cast applied to each frame's RGB in linear light (eval/cast.rs);
-    /// a list (`none,warm,cool,dim`) evaluates each and prints a row per cast.
-    #[arg(long, value_enum, value_delimiter = ',', default_value = "none")]
-    pub cast: Vec<cast::Cast>,
+    /// Colour cast applied to each frame's RGB in linear light
+    /// (`fusepose_scene::render::cast`); a list (`none,warm,cool,dim`)
+    /// evaluates each and prints a row per cast.
+    #[arg(long, value_delimiter = ',', default_value = "none", value_parser = cast_arg())]
+    pub cast: Vec<Cast>,
+}
+
+/// `--cast`'s parser: the casts' names as clap's possible values (shown in `--help`).
+fn cast_arg() -> impl clap::builder::TypedValueParser<Value = Cast> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Cast::ALL.map(Cast::name))
+        .map(|s| s.parse::<Cast>().expect("a possible value names a cast"))
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -450,7 +458,7 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     bar.set_prefix(runners.iter().map(|r| r.name.clone()).collect::<Vec<_>>().join(","));
     for index in 0..frames {
         let mut frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
-        let colour_cast = args.cast.first().copied().unwrap_or(cast::Cast::None);
+        let colour_cast = args.cast.first().copied().unwrap_or(Cast::None);
         colour_cast.apply(&mut frame.rgb, args.seed.wrapping_add(index as u64));
         if let Some(seg) = &mut net_masks {
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;

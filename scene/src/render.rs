@@ -26,6 +26,7 @@
 //! [`apply_camera_effects`].
 
 mod camera_pipeline;
+pub mod cast;
 mod jpeg_artefacts;
 mod lighting;
 mod modes;

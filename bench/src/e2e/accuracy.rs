@@ -250,7 +250,7 @@ mod tests {
     fn a_bop_split_source_scores_its_own_truth() {
         let root = std::env::temp_dir().join(format!("fusepose-bench-bop-truths-{}", std::process::id()));
         let _ = std::fs::remove_dir_all(&root);
-        crate::video::write_test_split(&root, 2);
+        crate::video::write_test_split(&root, 2).unwrap();
         let truths = Truths::load(&format!("bop:2:{}", root.display()), 0, 0).unwrap();
         for step in 0..5 {
             let frame = truths.video.frame_at(step);

@@ -19,6 +19,7 @@ use std::path::PathBuf;
 use std::time::Duration;
 
 use fusepose_client::{Ipc, StatsClient};
+use fusepose_scene::render::cast::Cast;
 use hdrhistogram::Histogram;
 
 use crate::child::{ChildProcess, IpcNamespace};
@@ -88,6 +89,10 @@ pub struct E2eArgs {
     /// camera on each scene; `CONFIRMED` and stable ids need repeats).
     #[arg(long, default_value_t = 12)]
     pub hold: usize,
+    /// Colour cast the producers apply to every frame (`none`, `warm`,
+    /// `cool`, `dim`: as `fusepose eval --cast`), for a robustness column.
+    #[arg(long, default_value = "none", value_parser = cast_arg())]
+    pub cast: Cast,
     /// Scene seed.
     #[arg(long, default_value_t = 7)]
     pub seed: u64,
@@ -122,12 +127,20 @@ impl Default for E2eArgs {
             video_frames: 48,
             source: None,
             hold: 12,
+            cast: Cast::None,
             seed: 7,
             estimator_extra: String::new(),
             smoke: false,
             out: "scratch/bench/e2e".into(),
         }
     }
+}
+
+/// `--cast`'s parser: the casts' names as clap's possible values.
+fn cast_arg() -> impl clap::builder::TypedValueParser<Value = Cast> {
+    use clap::builder::TypedValueParser;
+    clap::builder::PossibleValuesParser::new(Cast::ALL.map(Cast::name))
+        .map(|s| s.parse::<Cast>().expect("a possible value names a cast"))
 }
 
 impl E2eArgs {
@@ -322,6 +335,7 @@ fn run_rate(args: &E2eArgs, fps: f64) -> anyhow::Result<Vec<RateResult>> {
                 objects.clone(),
                 (args.seed + i as u64).to_string(),
                 video_frames.to_string(),
+                args.cast.name().into(),
                 name.clone(),
                 go.display().to_string(),
             ],
@@ -431,7 +445,7 @@ pub fn run(args: &E2eArgs) -> anyhow::Result<E2eReport> {
 pub fn render(r: &E2eReport) -> String {
     let a = &r.args;
     let mut s = format!(
-        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + {} camera(s), each a producer ({}) + consumer\n",
+        "e2e: daemon (net, {} thread(s), refine <= {}, deadline-aware {}, tracking {}, pinned {}) + {} camera(s), each a producer ({}; colour cast {}) + consumer\n",
         a.threads.map_or_else(|| "machine's".to_owned(), |t| t.clamp(1, 2).to_string()),
         a.refine_iterations,
         !a.no_degrade,
@@ -449,7 +463,8 @@ pub fn render(r: &E2eReport) -> String {
                     crate::video::Copies::Heap => ", one class as a heap",
                 }
             ),
-        }
+        },
+        a.cast.name()
     );
     if let Some(e) = r.rates.first().map(|r| &r.estimator).filter(|e| !e.is_empty()) {
         s.push_str(&format!("estimator: {e}\n"));

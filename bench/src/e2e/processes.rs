@@ -25,6 +25,8 @@ use fusepose_client::{
     Consumer, DepthMut, FrameLayout, Ipc, IpcOptions, LabelFormat, LabelsMut, PoseStatus, Producer, monotonic_ns,
 };
 
+use fusepose_scene::render::cast::Cast;
+
 use crate::video::{self, DEPTH_SCALE_M};
 
 /// The camera name every e2e process uses.
@@ -46,12 +48,14 @@ pub fn daemon_main(args: &[String]) -> anyhow::Result<()> {
 
 pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
     anyhow::ensure!(
-        (5..=7).contains(&args.len()),
-        "usage: e2e-producer FPS FRAMES SOURCE SEED VIDEO_FRAMES [CAMERA [GO_FILE]] (SOURCE: OBJECTS[:pair|:heap] or bop:HOLD:DIR)"
+        (6..=8).contains(&args.len()),
+        "usage: e2e-producer FPS FRAMES SOURCE SEED VIDEO_FRAMES CAST [CAMERA [GO_FILE]] \
+         (SOURCE: OBJECTS[:pair|:heap] or bop:HOLD:DIR; CAST: none, warm, cool or dim)"
     );
-    let camera = args.get(5).map_or(CAMERA, String::as_str);
+    let cast: Cast = args[5].parse().map_err(|e: String| anyhow::anyhow!(e))?;
+    let camera = args.get(6).map_or(CAMERA, String::as_str);
     // With several producers: start sending only once every one has rendered its video.
-    let go_file = args.get(6).map(std::path::PathBuf::from);
+    let go_file = args.get(7).map(std::path::PathBuf::from);
     let fps: f64 = args[0].parse()?;
     let frames: u64 = args[1].parse()?;
     // `N:pair` / `N:heap`: N classes, one of them standing twice as a
@@ -60,7 +64,11 @@ pub fn producer_main(args: &[String]) -> anyhow::Result<()> {
     let seed: u64 = args[3].parse()?;
     let video_frames: usize = args[4].parse()?;
     let set = fusepose_scene::builtin::builtin_objects();
-    let video = source.load(&set, seed, video_frames)?;
+    let mut video = source.load(&set, seed, video_frames)?;
+    // The cast's noise is drawn once per video frame (a held image repeats it).
+    for (i, f) in video.frames.iter_mut().enumerate() {
+        cast.apply(&mut f.rgb, seed.wrapping_add(i as u64));
+    }
     let k = video.intrinsics;
     let layout = FrameLayout {
         width: k.width,

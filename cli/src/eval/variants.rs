@@ -1,4 +1,4 @@
-//! The evaluation repeated: once per colour cast (`--cast`, [`super::cast`])
+//! The evaluation repeated: once per colour cast (`--cast`, [`fusepose_scene::render::cast`])
 //! and per sampling seed (`--seeds N`: seeds `seed`, `seed + 1`, …), then one
 //! summary row per cast and run, with the mean and standard deviation over
 //! the seeds.
@@ -11,7 +11,7 @@
 use std::path::PathBuf;
 
 use super::Args;
-use super::cast::Cast;
+use fusepose_scene::render::cast::Cast;
 
 /// Runs `run_one` once per cast and seed (a single cast and seed: just once,
 /// as it always did), then prints the summary. `run_one` returns the

@@ -1,17 +1,15 @@
-//! `fusepose eval --cast`: colour-cast variants of a test split, so that an
-//! accuracy table can carry a robustness column (issue 19). Each cast acts on
-//! every loaded frame's RGB in linear light: sRGB-decoded values are scaled
-//! per channel (white balance warm / cool, or −1.2 EV) and re-encoded to sRGB;
-//! `dim` then adds Gaussian sensor noise of σ = 3 8-bit levels, seeded per
-//! frame so that runs repeat. Depth, masks and ground truth are untouched.
-//!
-//! `--cast warm,cool` runs the whole evaluation once per cast
-//! ([`super::variants`]).
+//! Colour-cast variants of stored images, so that an accuracy table can
+//! carry a robustness column (issue 19; `fusepose eval --cast`,
+//! `fusepose-bench e2e --cast`). Each cast acts on a frame's RGB in linear
+//! light: sRGB-decoded values are scaled per channel (white balance warm /
+//! cool, or −1.2 EV) and re-encoded to sRGB; `dim` then adds Gaussian sensor
+//! noise of σ = 3 8-bit levels, seeded per frame so that runs repeat. Depth,
+//! masks and ground truth are untouched.
 
-use fusepose_scene::render::srgb;
+use super::srgb;
 
 /// A colour cast applied to each frame before estimation.
-#[derive(Clone, Copy, Debug, PartialEq, Eq, clap::ValueEnum)]
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub enum Cast {
     /// The images as stored.
     None,
@@ -26,7 +24,21 @@ pub enum Cast {
 /// Standard deviation of `dim`'s sensor noise, in 8-bit sRGB levels.
 const DIM_NOISE_LEVELS: f64 = 3.0;
 
+impl std::str::FromStr for Cast {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, Self::Err> {
+        Self::ALL
+            .into_iter()
+            .find(|c| c.name() == s)
+            .ok_or_else(|| format!("unknown colour cast {s:?}: expected one of none, warm, cool, dim"))
+    }
+}
+
 impl Cast {
+    /// Every cast, in the order tables list them.
+    pub const ALL: [Cast; 4] = [Cast::None, Cast::Warm, Cast::Cool, Cast::Dim];
+
     pub fn name(self) -> &'static str {
         match self {
             Cast::None => "none",
@@ -110,6 +122,14 @@ mod tests {
 
     fn image(len: usize) -> Vec<u8> {
         (0..len).map(|i| (i * 37 % 256) as u8).collect()
+    }
+
+    #[test]
+    fn names_parse_back_and_others_are_refused() {
+        for c in Cast::ALL {
+            assert_eq!(c.name().parse::<Cast>(), Ok(c));
+        }
+        assert!("sepia".parse::<Cast>().unwrap_err().contains("none, warm, cool, dim"));
     }
 
     #[test]
