@@ -286,7 +286,6 @@ pub fn ping_pong(i: usize, len: usize) -> usize {
 /// each view's depth (0.1 mm units) and true class ids.
 pub fn write_test_split(root: &Path, views: usize) -> anyhow::Result<Vec<(Vec<u16>, Vec<u16>)>> {
     use fusepose_scene::bop::{BopWriter, FrameToWrite, InstanceToWrite, ObjectSource};
-    use fusepose_scene::render::DEPTH_U16_PER_METRE;
     use fusepose_scene::sampler::render_view;
     let set = fusepose_scene::builtin::builtin_objects();
     let k = Intrinsics::YCB_VIDEO;
@@ -297,26 +296,8 @@ pub fn write_test_split(root: &Path, views: usize) -> anyhow::Result<Vec<(Vec<u1
     let mut written = Vec::new();
     for view in 0..views {
         let truth = render_view(&scene, &set, view, &k, &NoiseConfig::default(), &mut target)?;
-        let instances: Vec<InstanceToWrite> = truth
-            .objects
-            .iter()
-            .map(|o| InstanceToWrite {
-                obj_id: o.class_id,
-                pose: o.pose,
-                instance_label: o.instance_label,
-                px_count_all: Some(o.alone_pixels),
-            })
-            .collect();
-        writer.write_frame(&FrameToWrite {
-            scene_id: 0,
-            im_id: view as u32,
-            intrinsics: truth.intrinsics,
-            rgb: target.rgb(),
-            depth: target.depth_u16(),
-            depth_unit_m: 1.0 / DEPTH_U16_PER_METRE,
-            instance_labels: target.labels(),
-            instances: &instances,
-        })?;
+        let instances = InstanceToWrite::of_truth(&truth);
+        writer.write_frame(&FrameToWrite::rendered(0, view as u32, &truth, &target, &instances))?;
         written.push((target.depth_u16().to_vec(), truth.objects.iter().map(|o| o.class_id).collect()));
     }
     Ok(written)

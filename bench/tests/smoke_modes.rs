@@ -18,6 +18,27 @@ fn bench(args: &[&str]) -> String {
     stdout
 }
 
+/// `fusepose-bench e2e --smoke` with verification flagging instead of
+/// dropping (the tests count poses), the shipped weights, `extra` and an
+/// output folder.
+fn e2e_smoke(weights: &str, out: &std::path::Path, extra: &[&str]) -> String {
+    let mut args = vec!["e2e", "--smoke", "--weights", weights, "--estimator-extra", "verify = \"flag\""];
+    args.extend_from_slice(extra);
+    args.extend_from_slice(&["--out", out.to_str().expect("a UTF-8 temp path")]);
+    bench(&args)
+}
+
+/// The e2e consumer's accuracy line: true objects to find, and at least
+/// half of them found.
+fn assert_most_found(text: &str) {
+    let line = text.lines().find(|l| l.contains("true objects >=")).expect("an accuracy line");
+    let count = |before: &str| -> f64 {
+        line.split(before).next().and_then(|s| s.rsplit(' ').next()).and_then(|s| s.parse().ok()).unwrap()
+    };
+    let (visible, found) = (count(" true objects >="), count(" found ("));
+    assert!(visible > 0.0 && found >= 0.5 * visible, "{line}");
+}
+
 fn out_dir(tag: &str) -> PathBuf {
     std::env::temp_dir().join(format!("fusepose-bench-smoke-{tag}-{}", std::process::id()))
 }
@@ -66,19 +87,7 @@ fn e2e_smoke_poses_frames_through_daemon_and_consumer() {
     // off: on a loaded machine the daemon would shed the smallest instances to
     // keep its deadline (tested in the estimator), and this test counts the
     // poses of every labelled object.
-    let text = bench(&[
-        "e2e",
-        "--smoke",
-        "--no-degrade",
-        "--fps",
-        "30",
-        "--weights",
-        &weights,
-        "--estimator-extra",
-        "verify = \"flag\"",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let text = e2e_smoke(&weights, &out, &["--no-degrade", "--fps", "30"]);
     let v = row_numbers(&text, "cam0");
     // fps, achieved, deadline, sent, posed, skipped, missed, late, degraded, p50, p99, p99.9, max, iters
     assert!(v.len() == 14 && v[0] == 30.0, "{v:?}");
@@ -86,12 +95,7 @@ fn e2e_smoke_poses_frames_through_daemon_and_consumer() {
     assert!(v[0] > 0.0 && v[3] > 0.0 && v[8] > 0.0 && v[8] <= v[11], "{v:?}");
     assert!(text.contains("5.00 objects per message"), "every message poses the 5 labelled objects:\n{text}");
     // The consumer scored the poses against the video's truth: most are found.
-    let line = text.lines().find(|l| l.contains("true objects >=")).expect("an accuracy line");
-    let count = |before: &str| -> f64 {
-        line.split(before).next().and_then(|s| s.rsplit(' ').next()).and_then(|s| s.parse().ok()).unwrap()
-    };
-    let (visible, found) = (count(" true objects >="), count(" found ("));
-    assert!(visible > 0.0 && found >= 0.5 * visible, "{line}");
+    assert_most_found(&text);
     let _ = std::fs::remove_dir_all(out);
 }
 
@@ -104,32 +108,10 @@ fn e2e_smoke_replays_a_bop_split_with_a_colour_cast() {
     let out = out_dir("e2e-bop");
     let split = out.join("split");
     fusepose_bench::video::write_test_split(&split, 2).expect("a BOP split");
-    let text = bench(&[
-        "e2e",
-        "--smoke",
-        "--no-degrade",
-        "--fps",
-        "30",
-        "--weights",
-        &weights,
-        "--source",
-        split.to_str().unwrap(),
-        "--hold",
-        "3",
-        "--cast",
-        "dim",
-        "--estimator-extra",
-        "verify = \"flag\"",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let source = ["--no-degrade", "--fps", "30", "--source", split.to_str().unwrap(), "--hold", "3", "--cast", "dim"];
+    let text = e2e_smoke(&weights, &out, &source);
     assert!(text.contains("BOP split") && text.contains("colour cast dim"), "{text}");
-    let line = text.lines().find(|l| l.contains("true objects >=")).expect("an accuracy line");
-    let count = |before: &str| -> f64 {
-        line.split(before).next().and_then(|s| s.rsplit(' ').next()).and_then(|s| s.parse().ok()).unwrap()
-    };
-    let (visible, found) = (count(" true objects >="), count(" found ("));
-    assert!(visible > 0.0 && found >= 0.5 * visible, "{line}");
+    assert_most_found(&text);
     let _ = std::fs::remove_dir_all(out);
 }
 
@@ -137,20 +119,7 @@ fn e2e_smoke_replays_a_bop_split_with_a_colour_cast() {
 fn e2e_smoke_serves_two_cameras_and_their_cell() {
     let Some(weights) = weights() else { return };
     let out = out_dir("e2e2");
-    let text = bench(&[
-        "e2e",
-        "--smoke",
-        "--cameras",
-        "2",
-        "--fps",
-        "20",
-        "--weights",
-        &weights,
-        "--estimator-extra",
-        "verify = \"flag\"",
-        "--out",
-        out.to_str().unwrap(),
-    ]);
+    let text = e2e_smoke(&weights, &out, &["--cameras", "2", "--fps", "20"]);
     for camera in ["cam0", "cam1"] {
         let v = row_numbers(&text, camera);
         assert!(v.len() == 14 && v[4] > 0.0, "{camera} posed frames: {v:?}\n{text}");

@@ -21,7 +21,7 @@ use fusepose_scene::Intrinsics;
 use fusepose_scene::bop::{BopWriter, FrameToWrite, InstanceToWrite, ObjectSource};
 use fusepose_scene::contact_sheet::{ContactSheet, FrameView};
 use fusepose_scene::mesh_io::load_object_set;
-use fusepose_scene::render::{DEPTH_U16_PER_METRE, DepthSensor, NoiseConfig, Randomize, RenderTarget};
+use fusepose_scene::render::{DepthSensor, NoiseConfig, Randomize, RenderTarget};
 use fusepose_scene::sampler::{SamplerConfig, render_view, sample_scene};
 use indicatif::{ProgressBar, ProgressStyle};
 
@@ -259,27 +259,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let truth = render_view(&scene, &set, view, &k, &noise, &mut target)
                 .with_context(|| format!("rendering scene {scene_id} view {view}"))?;
             let t1 = Instant::now();
-            let instances: Vec<InstanceToWrite> = truth
-                .objects
-                .iter()
-                .map(|o| InstanceToWrite {
-                    obj_id: o.class_id,
-                    pose: o.pose,
-                    instance_label: o.instance_label,
-                    px_count_all: Some(o.alone_pixels),
-                })
-                .collect();
-            writer.write_frame(&FrameToWrite {
-                scene_id,
-                im_id: view as u32,
-                // The camera actually used (jittered per view with randomisation).
-                intrinsics: truth.intrinsics,
-                rgb: target.rgb(),
-                depth: target.depth_u16(),
-                depth_unit_m: 1.0 / DEPTH_U16_PER_METRE,
-                instance_labels: target.labels(),
-                instances: &instances,
-            })?;
+            let instances = InstanceToWrite::of_truth(&truth);
+            // The camera actually used (jittered per view with randomisation).
+            writer.write_frame(&FrameToWrite::rendered(scene_id, view as u32, &truth, &target, &instances))?;
             totals.render += t1 - t0;
             totals.write += t1.elapsed();
             totals.frames += 1;

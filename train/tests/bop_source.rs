@@ -24,16 +24,7 @@ fn bop_frames_become_samples_matched_to_their_ground_truth() {
         let truth =
             render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Instance, &mut target)
                 .unwrap();
-        let instances: Vec<InstanceToWrite> = truth
-            .objects
-            .iter()
-            .map(|o| InstanceToWrite {
-                obj_id: o.class_id,
-                pose: o.pose,
-                instance_label: o.instance_label,
-                px_count_all: Some(o.alone_pixels),
-            })
-            .collect();
+        let instances = InstanceToWrite::of_truth(&truth);
         writer
             .write_frame(&FrameToWrite {
                 scene_id: 0,

@@ -58,18 +58,18 @@ pub fn gemm_acc(a: ArrayView2<f32>, b: ArrayView2<f32>, c: &mut ArrayViewMut2<f3
         #[cfg(target_arch = "x86_64")]
         if simd_ok() {
             while j0 + 16 <= n {
-                simd::panel::<2>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc);
+                simd::panel::<2, false>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc, 16);
                 j0 += 16;
             }
+            // Then 8 columns, and the last 1-7 (the pose heads have 4, 3 and
+            // 1) through a lane mask: the scalar loop below was 4 % of the
+            // estimator's CPU time on the heads alone.
             while j0 + 8 <= n {
-                simd::panel::<1>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc);
+                simd::panel::<1, false>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc, 8);
                 j0 += 8;
             }
-            // The last 1-7 columns (the pose heads have 4, 3 and 1) through
-            // a lane mask: the scalar loop below was 4 % of the estimator's
-            // CPU time on the heads alone.
             if j0 < n {
-                simd::panel_masked(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc, n - j0);
+                simd::panel::<1, true>(m, k, pa, lda, pb.add(j0), ldb, pc.add(j0), ldc, n - j0);
                 j0 = n;
             }
         }
@@ -99,27 +99,13 @@ mod simd {
     /// Rows of A from which a K block of B is packed first (two 6-row tiles and more).
     const PACK_MIN_ROWS: usize = 12;
 
-    /// All rows of a `W*8`-column panel: for each K block, 6-row tiles, then the remainder.
+    /// All rows of a `W*8`-column panel: for each K block, 6-row tiles, then
+    /// the remainder. `MASKED` (with `W = 1`): the panel is the last `cols`
+    /// (1-7) columns, B and C read and written through a lane mask, so no
+    /// element past column `cols` is touched.
     #[allow(clippy::too_many_arguments)]
     #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn panel<const W: usize>(
-        m: usize,
-        k: usize,
-        a: *const f32,
-        lda: usize,
-        b: *const f32,
-        ldb: usize,
-        c: *mut f32,
-        ldc: usize,
-    ) {
-        unsafe { rows::<W, false>(m, k, a, lda, b, ldb, c, ldc, _mm256_setzero_si256()) }
-    }
-
-    /// All rows of the last `cols` (1-7) columns: B and C are read and
-    /// written through a lane mask, so no element past column `cols` is touched.
-    #[allow(clippy::too_many_arguments)]
-    #[target_feature(enable = "avx2,fma")]
-    pub unsafe fn panel_masked(
+    pub unsafe fn panel<const W: usize, const MASKED: bool>(
         m: usize,
         k: usize,
         a: *const f32,
@@ -130,27 +116,9 @@ mod simd {
         ldc: usize,
         cols: usize,
     ) {
-        debug_assert!((1..8).contains(&cols));
+        debug_assert!(if MASKED { W == 1 && (1..8).contains(&cols) } else { cols == W * 8 });
         let lanes = _mm256_setr_epi32(0, 1, 2, 3, 4, 5, 6, 7);
         let mask = _mm256_cmpgt_epi32(_mm256_set1_epi32(cols as i32), lanes);
-        unsafe { rows::<1, true>(m, k, a, lda, b, ldb, c, ldc, mask) }
-    }
-
-    /// [`panel`]'s loop; `MASKED` (with `W = 1`) loads and stores through `mask`.
-    #[allow(clippy::too_many_arguments)]
-    #[target_feature(enable = "avx2,fma")]
-    #[inline]
-    unsafe fn rows<const W: usize, const MASKED: bool>(
-        m: usize,
-        k: usize,
-        a: *const f32,
-        lda: usize,
-        b: *const f32,
-        ldb: usize,
-        c: *mut f32,
-        ldc: usize,
-        mask: __m256i,
-    ) {
         // The K block of B, copied into consecutive rows when enough row
         // tiles reuse it: B's own rows are often a multiple of 1 KiB apart
         // (weights of 256 or 512 outputs), so its 256 lines fell into a few

@@ -358,16 +358,7 @@ fn rendered_scene_round_trips_through_the_writer_and_reader() {
     let mut class_planes = Vec::new();
     for view in 0..2 {
         let truth = render_view(&scene, &set, view, &k, &NoiseConfig::default(), &mut target).unwrap();
-        let instances: Vec<InstanceToWrite> = truth
-            .objects
-            .iter()
-            .map(|o| InstanceToWrite {
-                obj_id: o.class_id,
-                pose: o.pose,
-                instance_label: o.instance_label,
-                px_count_all: Some(o.alone_pixels),
-            })
-            .collect();
+        let instances = InstanceToWrite::of_truth(&truth);
         w.write_frame(&FrameToWrite {
             scene_id: 0,
             im_id: view as u32,

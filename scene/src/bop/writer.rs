@@ -31,6 +31,23 @@ pub struct InstanceToWrite {
     pub px_count_all: Option<u32>,
 }
 
+impl InstanceToWrite {
+    /// Every object of a rendered view's truth, with its pose, label and
+    /// unoccluded pixel count (what `fusepose render` writes).
+    pub fn of_truth(truth: &crate::sampler::FrameTruth) -> Vec<Self> {
+        truth
+            .objects
+            .iter()
+            .map(|o| Self {
+                obj_id: o.class_id,
+                pose: o.pose,
+                instance_label: o.instance_label,
+                px_count_all: Some(o.alone_pixels),
+            })
+            .collect()
+    }
+}
+
 /// One frame to write: planes row-major, top row first, sized by `intrinsics`.
 #[derive(Clone, Copy, Debug)]
 pub struct FrameToWrite<'a> {
@@ -46,6 +63,30 @@ pub struct FrameToWrite<'a> {
     /// Instance label per pixel (0 = background), as `RenderTarget::labels`.
     pub instance_labels: &'a [u16],
     pub instances: &'a [InstanceToWrite],
+}
+
+impl<'a> FrameToWrite<'a> {
+    /// The frame the renderer left in `target` for a view whose truth is
+    /// `truth`, with the camera the truth reports (jittered per view under
+    /// randomisation) and depth in the renderer's units.
+    pub fn rendered(
+        scene_id: u32,
+        im_id: u32,
+        truth: &crate::sampler::FrameTruth,
+        target: &'a crate::render::RenderTarget,
+        instances: &'a [InstanceToWrite],
+    ) -> Self {
+        Self {
+            scene_id,
+            im_id,
+            intrinsics: truth.intrinsics,
+            rgb: target.rgb(),
+            depth: target.depth_u16(),
+            depth_unit_m: 1.0 / crate::render::DEPTH_U16_PER_METRE,
+            instance_labels: target.labels(),
+            instances,
+        }
+    }
 }
 
 struct SceneState {
