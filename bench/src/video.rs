@@ -105,6 +105,21 @@ impl Source {
         Ok(Self::Rendered { objects, copies })
     }
 
+    /// What the producer sends, for the benchmark's header.
+    pub fn describe(&self) -> String {
+        match self {
+            Self::Rendered { objects, copies } => {
+                let copies = match copies {
+                    Copies::None => "",
+                    Copies::Pair => ", one class twice",
+                    Copies::Heap => ", one class as a heap",
+                };
+                format!("{objects} objects{copies}, rendered video")
+            }
+            Self::Bop { root, hold } => format!("BOP split {}/test, each image held {hold} frames", root.display()),
+        }
+    }
+
     /// The command-line word for this source.
     pub fn arg(&self) -> String {
         match self {

@@ -452,18 +452,7 @@ pub fn render(r: &E2eReport) -> String {
         a.tracking,
         a.pin,
         a.cameras,
-        match &a.source {
-            Some(root) => format!("BOP split {}/test, each image held {} frames", root.display(), a.hold.max(1)),
-            None => format!(
-                "{} objects{}, rendered video",
-                a.objects_per_frame,
-                match a.copies() {
-                    crate::video::Copies::None => "",
-                    crate::video::Copies::Pair => ", one class twice",
-                    crate::video::Copies::Heap => ", one class as a heap",
-                }
-            ),
-        },
+        a.video_source().describe(),
         a.cast.name()
     );
     if let Some(e) = r.rates.first().map(|r| &r.estimator).filter(|e| !e.is_empty()) {
