@@ -141,6 +141,10 @@ pub struct Args {
     /// for verification to refuse). Default: the engine's, 0.
     #[arg(long)]
     pub seg_background_offset: Option<f32>,
+    /// `--masks net`: average the segmenter's logits over the frame and its
+    /// mirror image (twice its network's time). Default: the engine's, off.
+    #[arg(long)]
+    pub seg_flip_average: Option<bool>,
     /// `--masks net`: regroup the segmenter's cells by the depth image before
     /// its clean-up: cells standing on the table together that fit inside one
     /// object of their majority class take that class. `off`, `on`,
@@ -433,6 +437,7 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
                 min_interior: args.seg_min_interior,
                 voting: args.seg_voting,
                 background_offset: args.seg_background_offset,
+                flip_average: args.seg_flip_average,
                 depth_regions: args.seg_depth_regions.0,
             };
             Some(NetMasks::load(&weights, &objects, &settings)?)

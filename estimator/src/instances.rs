@@ -21,11 +21,18 @@
 //! first pixel for class planes, instance-id order for instance planes), and
 //! class ids above `num_classes` are skipped and counted in [`LabelStats`].
 //!
-//! Allocation: [`InstanceFinder`] keeps a component-id buffer and a flood-fill
-//! stack of `width * height` entries, and one tally per instance-table entry.
+//! Class planes are labelled by runs: each row's runs of one class are joined
+//! to the touching runs of the same class in the row above (union–find, the
+//! earlier run the root), then numbered in raster order of their first
+//! pixel, as a flood fill from each unvisited pixel in raster order would
+//! number them, at a fraction of its cost per pixel.
+//!
+//! Allocation: [`InstanceFinder`] keeps a component-id buffer of
+//! `width * height` entries, room for as many runs as a frame can have, one
+//! tally per component and one per instance-table entry.
 //! They are sized on the first frame and reused; they grow (allocate) only
-//! when a frame has more pixels (or a longer instance table) than any frame
-//! before. Frames of a fixed size never allocate after the first.
+//! when a frame has more pixels (or a longer instance table, or more
+//! components) than any frame before. Frames of a fixed size never allocate after the first.
 
 use crate::frame::LabelPlane;
 
@@ -78,6 +85,32 @@ struct Tally {
 
 impl Tally {
     const EMPTY: Tally = Tally { pixels: 0, bbox: [u16::MAX, u16::MAX, 0, 0] };
+
+    fn add_row(&mut self, count: u32, u_first: usize, u_last: usize, v: usize) {
+        let clamp = |x: usize| x.min(u16::MAX as usize) as u16;
+        self.pixels += count;
+        let b = &mut self.bbox;
+        *b = [b[0].min(clamp(u_first)), b[1].min(clamp(v)), b[2].max(clamp(u_last)), b[3].max(clamp(v))];
+    }
+}
+
+/// A run of pixels of one class in one row of a class plane.
+#[derive(Clone, Copy, Debug)]
+struct Run {
+    /// Pixel index of its first pixel, and one past its last.
+    start: u32,
+    end: u32,
+    class_id: u16,
+    /// Union–find link (index into the runs; a root links to itself).
+    parent: u32,
+    /// Index of its component among the frame's components (set once numbered).
+    component: u32,
+}
+
+/// Most runs, and components, a frame of `pixels` pixels can have (one per
+/// pixel, on a checkerboard of two classes).
+fn max_runs(pixels: usize) -> usize {
+    pixels
 }
 
 /// Reusable buffers for connected-component labelling.
@@ -85,8 +118,10 @@ impl Tally {
 pub struct InstanceFinder {
     /// Per pixel: 0 = background/unknown/unvisited, otherwise the component id.
     ids: Vec<u32>,
-    /// Flood-fill stack of pixel indices.
-    stack: Vec<u32>,
+    /// Class planes: the runs of the frame, in raster order.
+    runs: Vec<Run>,
+    /// Class planes: class and tally of each component, in raster order of its first pixel.
+    components: Vec<(u16, Tally)>,
     /// Kept components, sorted by pixel count, descending.
     kept: Vec<Component>,
     /// Instance planes: one tally per instance-table entry.
@@ -109,7 +144,8 @@ impl InstanceFinder {
     pub fn with_capacity(pixels: usize, max_instances: usize) -> Self {
         Self {
             ids: Vec::with_capacity(pixels),
-            stack: Vec::with_capacity(pixels),
+            runs: Vec::with_capacity(max_runs(pixels)),
+            components: Vec::with_capacity(max_runs(pixels)),
             kept: Vec::with_capacity(max_instances + 1),
             ..Self::default()
         }
@@ -135,30 +171,105 @@ impl InstanceFinder {
         }
         self.ids.clear();
         self.ids.resize(n, 0);
-        if self.stack.capacity() < n {
-            self.stack.reserve(n - self.stack.len());
+        let runs = max_runs(n);
+        if self.runs.capacity() < runs {
+            self.runs.reserve(runs - self.runs.len());
+            self.components.reserve(runs.saturating_sub(self.components.len()));
         }
-        if let LabelPlane::Instances { ids, classes } = labels {
-            self.next_id = classes.len().max(1) as u32;
-            self.find_instances(ids, classes, limits);
-            return &self.kept;
-        }
-        self.next_id = 1;
-        for start in 0..n {
-            let class_id = labels.class_at(start);
-            if class_id == 0 || self.ids[start] != 0 {
-                continue;
+        match *labels {
+            LabelPlane::U8(plane) => self.label_runs(|p| plane.get(p).map_or(0, |&c| c as u16), limits),
+            LabelPlane::U16(plane) => self.label_runs(|p| plane.get(p).copied().unwrap_or(0), limits),
+            LabelPlane::Instances { ids, classes } => {
+                self.next_id = classes.len().max(1) as u32;
+                self.find_instances(ids, classes, limits);
             }
-            if limits.num_classes != 0 && class_id > limits.num_classes {
-                self.stats.unknown_class_pixels += 1;
-                self.stats.max_unknown_class = self.stats.max_unknown_class.max(class_id);
-                continue;
-            }
-            let component = self.flood_fill(labels, start, class_id, self.next_id);
-            self.next_id += 1;
-            self.offer(component, limits);
         }
         &self.kept
+    }
+
+    /// Connected components of a class plane (`class_at(pixel index)`) by
+    /// runs; see the module doc.
+    fn label_runs(&mut self, class_at: impl Fn(usize) -> u16, limits: InstanceLimits) {
+        let (w, h) = (self.width, self.height);
+        self.runs.clear();
+        let mut above = 0..0;
+        for v in 0..h {
+            let row = v * w;
+            let first_of_row = self.runs.len();
+            // The first run above that may touch the next run of this row.
+            let mut j = above.start;
+            let mut u = 0;
+            while u < w {
+                let class_id = class_at(row + u);
+                let start = u;
+                u += 1;
+                while u < w && class_at(row + u) == class_id {
+                    u += 1;
+                }
+                if class_id == 0 {
+                    continue;
+                }
+                if limits.num_classes != 0 && class_id > limits.num_classes {
+                    self.stats.unknown_class_pixels += (u - start) as u32;
+                    self.stats.max_unknown_class = self.stats.max_unknown_class.max(class_id);
+                    continue;
+                }
+                let me = self.runs.len() as u32;
+                let (run_start, run_end) = ((row + start) as u32, (row + u) as u32);
+                self.runs.push(Run { start: run_start, end: run_end, class_id, parent: me, component: 0 });
+                // Runs above sharing a column with [start, u) touch this one.
+                while j < above.end && self.runs[j].end - (row - w) as u32 <= start as u32 {
+                    j += 1;
+                }
+                let mut k = j;
+                while k < above.end && self.runs[k].start - ((row - w) as u32) < u as u32 {
+                    if self.runs[k].class_id == class_id {
+                        self.union(k as u32, me);
+                    }
+                    k += 1;
+                }
+            }
+            above = first_of_row..self.runs.len();
+        }
+        // Number the components in raster order of their first pixel: a root
+        // is its component's earliest run, met before the rest of it.
+        self.components.clear();
+        for i in 0..self.runs.len() {
+            let root = self.root(i as u32) as usize;
+            let run = self.runs[i];
+            let component = if root == i {
+                self.components.push((run.class_id, Tally::EMPTY));
+                (self.components.len() - 1) as u32
+            } else {
+                self.runs[root].component
+            };
+            self.runs[i].component = component;
+            let (start, end) = (run.start as usize, run.end as usize);
+            self.components[component as usize].1.add_row((end - start) as u32, start % w, (end - 1) % w, start / w);
+            self.ids[start..end].fill(component + 1);
+        }
+        self.next_id = self.components.len() as u32 + 1;
+        for i in 0..self.components.len() {
+            let (class_id, t) = self.components[i];
+            self.offer(Component { class_id, component_id: i as u32 + 1, pixels: t.pixels, bbox: t.bbox }, limits);
+        }
+    }
+
+    /// The root of run `i`'s set (halving the path on the way).
+    fn root(&mut self, mut i: u32) -> u32 {
+        while self.runs[i as usize].parent != i {
+            let grand = self.runs[self.runs[i as usize].parent as usize].parent;
+            self.runs[i as usize].parent = grand;
+            i = grand;
+        }
+        i
+    }
+
+    /// Joins the sets of runs `a` and `b`; the earlier root stays the root.
+    fn union(&mut self, a: u32, b: u32) {
+        let (ra, rb) = (self.root(a), self.root(b));
+        let (keep, join) = if ra < rb { (ra, rb) } else { (rb, ra) };
+        self.runs[join as usize].parent = keep;
     }
 
     /// One instance per instance id (see the module doc): one pass tallies
@@ -311,44 +422,6 @@ impl InstanceFinder {
         self.kept.iter().filter(|c| new.contains(&c.component_id)).count()
     }
 
-    fn flood_fill(&mut self, labels: &LabelPlane<'_>, start: usize, class_id: u16, id: u32) -> Component {
-        let (w, h) = (self.width, self.height);
-        let (mut u_min, mut v_min, mut u_max, mut v_max) = (usize::MAX, usize::MAX, 0, 0);
-        let mut pixels: u32 = 0;
-        self.stack.clear();
-        self.ids[start] = id;
-        self.stack.push(start as u32);
-        while let Some(p) = self.stack.pop() {
-            let p = p as usize;
-            let (u, v) = (p % w, p / w);
-            pixels += 1;
-            u_min = u_min.min(u);
-            u_max = u_max.max(u);
-            v_min = v_min.min(v);
-            v_max = v_max.max(v);
-            let visit = |q: usize, ids: &mut Vec<u32>, stack: &mut Vec<u32>| {
-                if ids[q] == 0 && labels.class_at(q) == class_id {
-                    ids[q] = id;
-                    stack.push(q as u32);
-                }
-            };
-            if u > 0 {
-                visit(p - 1, &mut self.ids, &mut self.stack);
-            }
-            if u + 1 < w {
-                visit(p + 1, &mut self.ids, &mut self.stack);
-            }
-            if v > 0 {
-                visit(p - w, &mut self.ids, &mut self.stack);
-            }
-            if v + 1 < h {
-                visit(p + w, &mut self.ids, &mut self.stack);
-            }
-        }
-        let clamp = |x: usize| x.min(u16::MAX as usize) as u16;
-        Component { class_id, component_id: id, pixels, bbox: [clamp(u_min), clamp(v_min), clamp(u_max), clamp(v_max)] }
-    }
-
     /// Keeps `c` if it is among the `max_instances` largest so far.
     fn offer(&mut self, c: Component, limits: InstanceLimits) {
         if (c.pixels as usize) < limits.min_pixels {
@@ -382,6 +455,102 @@ mod tests {
             for u in rect[0]..=rect[2] {
                 plane[v * w + u] = class;
             }
+        }
+    }
+
+    /// Flood fill from each unvisited pixel in raster order (the labelling
+    /// before runs): the component ids plane and each component's class,
+    /// pixel count and box, in id order; unknown-class pixels counted.
+    fn flood_fill_reference(plane: &[u16], w: usize, h: usize, num_classes: u16) -> (Vec<u32>, Vec<Component>, u32) {
+        let mut ids = vec![0u32; w * h];
+        let (mut found, mut unknown) = (Vec::new(), 0);
+        for start in 0..w * h {
+            let class_id = plane[start];
+            if class_id == 0 || ids[start] != 0 {
+                continue;
+            }
+            if num_classes != 0 && class_id > num_classes {
+                unknown += 1;
+                continue;
+            }
+            let id = found.len() as u32 + 1;
+            let mut c = Component { class_id, component_id: id, pixels: 0, bbox: [u16::MAX, u16::MAX, 0, 0] };
+            let mut stack = vec![start];
+            ids[start] = id;
+            while let Some(p) = stack.pop() {
+                let (u, v) = (p % w, p / w);
+                c.pixels += 1;
+                c.bbox = [
+                    c.bbox[0].min(u as u16),
+                    c.bbox[1].min(v as u16),
+                    c.bbox[2].max(u as u16),
+                    c.bbox[3].max(v as u16),
+                ];
+                let mut visit = |q: usize| {
+                    if ids[q] == 0 && plane[q] == class_id {
+                        ids[q] = id;
+                        stack.push(q);
+                    }
+                };
+                if u > 0 {
+                    visit(p - 1);
+                }
+                if u + 1 < w {
+                    visit(p + 1);
+                }
+                if v > 0 {
+                    visit(p - w);
+                }
+                if v + 1 < h {
+                    visit(p + w);
+                }
+            }
+            found.push(c);
+        }
+        (ids, found, unknown)
+    }
+
+    #[test]
+    fn runs_label_as_a_raster_order_flood_fill_does() {
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_pcg::Pcg64::seed_from_u64(11);
+        let mut f = InstanceFinder::new();
+        for round in 0..400 {
+            let (w, h) = (rng.random_range(1..40), rng.random_range(1..30));
+            // Blobs of a few classes (4 is unknown below): runs of random
+            // length, each row a shifted copy of the one above now and then,
+            // so that regions wind, fork and join (U, spirals, combs).
+            let mut plane = vec![0u16; w * h];
+            for v in 0..h {
+                if v > 0 && rng.random_bool(0.6) {
+                    let shift = rng.random_range(0..3);
+                    for u in 0..w {
+                        plane[v * w + u] = plane[(v - 1) * w + (u + shift) % w];
+                    }
+                    continue;
+                }
+                let mut u = 0;
+                while u < w {
+                    let (class, run) = (rng.random_range(0..5u16), rng.random_range(1..9));
+                    for x in u..(u + run).min(w) {
+                        plane[v * w + x] = class;
+                    }
+                    u += run;
+                }
+            }
+            if round % 4 == 0 {
+                // A checkerboard of two classes: a component per pixel.
+                plane.iter_mut().enumerate().for_each(|(p, c)| *c = 1 + ((p % w + p / w) % 2) as u16);
+            }
+            let (ids, all, unknown) = flood_fill_reference(&plane, w, h, 3);
+            let mut expected = all.clone();
+            // `offer` keeps the largest first, ties in id order.
+            expected.sort_by_key(|c| (std::cmp::Reverse(c.pixels), c.component_id));
+            let found = f.find(&LabelPlane::U16(&plane), w, h, limits(1, 100_000, 3)).to_vec();
+            assert_eq!(f.component_ids(), &ids[..], "round {round}");
+            assert_eq!(found, expected, "round {round}");
+            assert_eq!(f.stats().unknown_class_pixels, unknown, "round {round}");
+            assert_eq!(f.next_split_id(), all.len() as u32 + 1);
         }
     }
 

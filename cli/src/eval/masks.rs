@@ -24,6 +24,8 @@ pub struct SegSettings {
     pub min_interior: Option<usize>,
     pub voting: Option<VotingMode>,
     pub background_offset: Option<f32>,
+    /// Logits averaged with the mirror image's (`SegEngine::set_flip_average`).
+    pub flip_average: Option<bool>,
     /// Cell labels regrouped by depth (`None` = off).
     pub depth_regions: Option<DepthRegionParams>,
 }
@@ -55,8 +57,16 @@ impl NetMasks {
     /// Loads the segmenter of `weights` (a network file with one embedded, or
     /// a segmenter file) with `settings` applied over the engine's defaults.
     pub fn load(weights: &Path, objects: &ObjectSet, settings: &SegSettings) -> anyhow::Result<Self> {
-        let SegSettings { min_cells, max_elongation, boundary, min_interior, voting, background_offset, depth_regions } =
-            *settings;
+        let SegSettings {
+            min_cells,
+            max_elongation,
+            boundary,
+            min_interior,
+            voting,
+            background_offset,
+            flip_average,
+            depth_regions,
+        } = *settings;
         let mut engine = SegEngine::load(weights, objects)
             .with_context(|| format!("--masks net: loading the segmenter of {}", weights.display()))?;
         if let Some(n) = min_cells {
@@ -76,6 +86,9 @@ impl NetMasks {
         }
         if let Some(o) = background_offset {
             engine.set_background_offset(o);
+        }
+        if let Some(on) = flip_average {
+            engine.set_flip_average(on);
         }
         if let Some(params) = depth_regions {
             let diameters = fusepose_estimator::parts::extents(objects, 1.0);

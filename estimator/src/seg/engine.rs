@@ -181,6 +181,11 @@ fn erode_boundaries(cells: &[u16], w: usize, out: &mut [u16]) {
 /// grid); a file with a larger grid gets NaN (not judged).
 const MAX_CELLS: usize = 160 * 120 + 64;
 
+/// Swaps left and right in every row of `width` values of `plane` (all channels).
+fn mirror_rows(plane: &mut [f32], width: usize) {
+    plane.chunks_exact_mut(width).for_each(<[f32]>::reverse);
+}
+
 /// A cell's softmax over `classes` logits (`logit(c)`): the largest logit
 /// and the sum of `exp(logit − largest)`, so that p(c) = exp(logit(c) −
 /// largest) / sum.
@@ -210,6 +215,10 @@ pub struct SegEngine {
     d1: Vec<f32>,
     /// `[K+1, H1*W1]`.
     logits: Vec<f32>,
+    /// Whether the logits average the frame's and its mirror image's ([`SegEngine::set_flip_average`]).
+    flip_average: bool,
+    /// `[K+1, H1*W1]`: the mirror image's logits, mirrored back (empty while `flip_average` is off).
+    mirrored_logits: Vec<f32>,
     /// `[d1, H1*W1]`: the offset branch's features when the file has it, else empty.
     o1: Vec<f32>,
     /// Whether `offsets` are not yet those of the last forward pass ([`SegEngine::compute_votes`]).
@@ -298,6 +307,8 @@ impl SegEngine {
             d2: vec![0.0; d2 * hw(2)],
             d1: vec![0.0; d1 * hw(1)],
             logits: vec![0.0; c.outputs() * hw(1)],
+            flip_average: false,
+            mirrored_logits: Vec::new(),
             offsets: if c.offsets { vec![0.0; 2 * hw(1)] } else { Vec::new() },
             o1: if c.offsets && c.offset_branch { vec![0.0; d1 * hw(1)] } else { Vec::new() },
             votes_pending: false,
@@ -441,6 +452,21 @@ impl SegEngine {
     /// leave the regions no pose explains to pose verification.
     pub fn set_background_offset(&mut self, offset: f32) {
         self.background_offset = if offset.is_finite() { offset } else { 0.0 };
+    }
+
+    /// Average the logits of the frame and of its mirror image (left and
+    /// right swapped, mirrored back), at twice the network's time per frame.
+    /// The segmenter was trained with horizontal flips, so both are inputs it
+    /// knows; where one view's colours mislead it the other may not. The
+    /// offset head's votes stay those of the frame itself. Default off.
+    pub fn set_flip_average(&mut self, on: bool) {
+        self.flip_average = on;
+        self.mirrored_logits = if on { vec![0.0; self.logits.len()] } else { Vec::new() };
+    }
+
+    /// Whether [`SegEngine::set_flip_average`] is on.
+    pub fn flip_average(&self) -> bool {
+        self.flip_average
     }
 
     /// How cell labels become the frame's labels ([`Boundary`]; default
@@ -703,6 +729,25 @@ impl SegEngine {
     }
 
     fn run(&mut self) {
+        if !self.flip_average {
+            return self.run_once();
+        }
+        let s = self.config.sizes();
+        let (in_w, out_w) = (s[0].1, s[1].1);
+        // The mirror image first, so that the activations left for the votes are the frame's own.
+        mirror_rows(&mut self.input, in_w);
+        self.run_once();
+        self.mirrored_logits.copy_from_slice(&self.logits);
+        mirror_rows(&mut self.mirrored_logits, out_w);
+        mirror_rows(&mut self.input, in_w);
+        self.run_once();
+        for (l, m) in self.logits.iter_mut().zip(&self.mirrored_logits) {
+            *l = 0.5 * (*l + m);
+        }
+    }
+
+    /// One forward pass of `input` into `logits` (and the votes when due).
+    fn run_once(&mut self) {
         let s = self.config.sizes();
         let hw = |l: usize| s[l].0 * s[l].1;
         let [c1, c2, c3, c4] = self.config.enc;
