@@ -221,6 +221,37 @@ fn the_offset_branch_runs_on_demand_without_allocating() {
 }
 
 #[test]
+fn flip_averaged_logits_are_the_mean_of_the_frame_and_its_mirror_and_do_not_allocate() {
+    let set = object_set(&[l_block(), step_block()]);
+    let mut engine = engine(&set);
+    let cfg = engine.config().clone();
+    let (in_w, out_w) = (cfg.input_width, cfg.output_size().1);
+    let mirror = |plane: &[f32], w: usize| -> Vec<f32> {
+        plane.chunks_exact(w).flat_map(|row| row.iter().rev().copied()).collect::<Vec<_>>()
+    };
+    // A lopsided input (a ramp and a block on the left), so that the mirror image differs.
+    let input: Vec<f32> = (0..4 * cfg.input_height * in_w)
+        .map(|i| {
+            let (x, c) = (i % in_w, i / (cfg.input_height * in_w));
+            if x < 40 { 1.5 - 0.3 * c as f32 } else { x as f32 / in_w as f32 - 0.5 }
+        })
+        .collect();
+    let own = engine.forward(&input).unwrap().to_vec();
+    let mirrored = mirror(engine.forward(&mirror(&input, in_w)).unwrap(), out_w);
+    assert_ne!(own, mirrored, "a lopsided input has logits of its own");
+    engine.set_flip_average(true);
+    let averaged = engine.forward(&input).unwrap().to_vec();
+    let expected: Vec<f32> = own.iter().zip(&mirrored).map(|(a, b)| 0.5 * (a + b)).collect();
+    assert_eq!(averaged, expected);
+
+    let (c0, d0) = frame_planes(0);
+    let mut labels = vec![0u16; 640 * 480];
+    engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    let n = allocations_in(|| engine.segment(&view(&c0, &d0), &mut labels).unwrap());
+    assert_eq!(n, 0, "flip-averaged segment allocated {n} times after warm-up");
+}
+
+#[test]
 fn engine_refuses_an_object_set_that_differs() {
     let set = object_set(&[l_block(), step_block()]);
     let file = SegFile::from_bytes(&weight_bytes(&SegConfig::new(2), &set)).unwrap();
