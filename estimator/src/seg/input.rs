@@ -22,6 +22,23 @@ fn boxes(len: usize, n: usize) -> Vec<(usize, usize)> {
         .collect()
 }
 
+/// Byte offsets of red and blue within a pixel of `format` (green is byte 1).
+fn red_blue_bytes(format: ColorFormat) -> (usize, usize) {
+    match format {
+        ColorFormat::Rgb8 => (0, 2),
+        ColorFormat::Bgr8 => (2, 0),
+    }
+}
+
+/// Writes input cell `i` (of `plane` per channel) from one box's colour sums
+/// over its `area` pixels and the sum and count of its valid depths.
+fn write_box(out: &mut [f32], plane: usize, i: usize, rgb: [u32; 3], area: usize, zsum: f32, zn: u32) {
+    for (c, &sum) in rgb.iter().enumerate() {
+        out[c * plane + i] = normalise_channel(sum as f32 / area as f32, c);
+    }
+    out[3 * plane + i] = if zn > 0 { zsum / zn as f32 } else { 0.0 };
+}
+
 /// Pixel `i` of `len` on a grid of `n` cells (cell c's centre at pixel
 /// coordinate (c + ½)·len/n): the cells either side and the weight of the
 /// second, clamped at the ends.
@@ -160,10 +177,7 @@ impl FrameMap {
     fn fill_input_rows(&self, frame: &FrameView<'_>, out: &mut [f32], raw_depth: impl Fn(usize) -> f32) {
         const BAND: usize = 256;
         let plane = self.in_w * self.in_h;
-        let (rc, bc) = match frame.color_format {
-            ColorFormat::Rgb8 => (0, 2),
-            ColorFormat::Bgr8 => (2, 0),
-        };
+        let (rc, bc) = red_blue_bytes(frame.color_format);
         let w = self.width;
         for (iy, &(y0, y1)) in self.in_y.iter().enumerate() {
             for (band, boxes) in self.in_x.chunks(BAND).enumerate() {
@@ -190,12 +204,8 @@ impl FrameMap {
                     }
                 }
                 for (b, &(x0, x1)) in boxes.iter().enumerate() {
-                    let n = ((y1 - y0) * (x1 - x0)) as f32;
-                    let i = iy * self.in_w + band * BAND + b;
-                    for c in 0..3 {
-                        out[c * plane + i] = normalise_channel(rgb[b][c] as f32 / n, c);
-                    }
-                    out[3 * plane + i] = if zn[b] > 0 { zsum[b] / zn[b] as f32 } else { 0.0 };
+                    let area = (y1 - y0) * (x1 - x0);
+                    write_box(out, plane, iy * self.in_w + band * BAND + b, rgb[b], area, zsum[b], zn[b]);
                 }
             }
         }
@@ -205,10 +215,7 @@ impl FrameMap {
     /// than the input grid (boxes overlap) and planes shorter than the frame.
     fn fill_input_per_box(&self, frame: &FrameView<'_>, out: &mut [f32]) {
         let plane = self.in_w * self.in_h;
-        let (rc, bc) = match frame.color_format {
-            ColorFormat::Rgb8 => (0, 2),
-            ColorFormat::Bgr8 => (2, 0),
-        };
+        let (rc, bc) = red_blue_bytes(frame.color_format);
         let w = self.width;
         for (iy, &(y0, y1)) in self.in_y.iter().enumerate() {
             for (ix, &(x0, x1)) in self.in_x.iter().enumerate() {
@@ -230,12 +237,7 @@ impl FrameMap {
                         }
                     }
                 }
-                let n = ((y1 - y0) * (x1 - x0)) as f32;
-                let i = iy * self.in_w + ix;
-                for c in 0..3 {
-                    out[c * plane + i] = normalise_channel(sum[c] as f32 / n, c);
-                }
-                out[3 * plane + i] = if zn > 0 { zsum / zn as f32 } else { 0.0 };
+                write_box(out, plane, iy * self.in_w + ix, sum, (y1 - y0) * (x1 - x0), zsum, zn);
             }
         }
     }
