@@ -251,6 +251,67 @@ fn flip_averaged_logits_are_the_mean_of_the_frame_and_its_mirror_and_do_not_allo
     assert_eq!(n, 0, "flip-averaged segment allocated {n} times after warm-up");
 }
 
+/// `region_probability` is the peak softmax probability of the class over
+/// the cells under the region's pixels inside the box: checked against that
+/// definition, pixel by pixel, for blobs and boxes that cut through them.
+#[test]
+fn region_probability_is_the_peak_over_the_cells_under_the_region() {
+    use rand::{Rng, SeedableRng};
+    let set = object_set(&[l_block(), step_block()]);
+    let mut engine = engine(&set);
+    let (c0, d0) = frame_planes(0);
+    let mut labels = vec![0u16; 640 * 480];
+    engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    let map = FrameMap::new(640, 480, engine.config());
+    let (out_w, out_h) = map.grid_size();
+    let cells = out_w * out_h;
+    let logits = engine.logits().to_vec();
+    let classes = set.len() + 1;
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(21);
+    for round in 0..60 {
+        // Two overlapping discs of ids 3 and 5 over noise of other ids.
+        let mut ids: Vec<u32> = (0..640 * 480).map(|_| rng.random_range(6..9)).collect();
+        for id in [3u32, 5] {
+            let (cu, cv, r) =
+                (rng.random_range(0..640) as i64, rng.random_range(0..480) as i64, rng.random_range(2..120));
+            for (p, x) in ids.iter_mut().enumerate() {
+                let (u, v) = ((p % 640) as i64, (p / 640) as i64);
+                if (u - cu).pow(2) + (v - cv).pow(2) <= r * r {
+                    *x = id;
+                }
+            }
+        }
+        let mut bbox = [rng.random_range(0..640u16), rng.random_range(0..480u16), 0, 0];
+        bbox[2] = rng.random_range(bbox[0]..640);
+        bbox[3] = rng.random_range(bbox[1]..480);
+        let class = rng.random_range(1..classes) as u16;
+        let mut under = std::collections::BTreeSet::new();
+        for v in bbox[1] as usize..=bbox[3] as usize {
+            for u in bbox[0] as usize..=bbox[2] as usize {
+                if ids[v * 640 + u] == 3 {
+                    let (cx, cy) = map.cell_of(u, v);
+                    under.insert(cy * out_w + cx);
+                }
+            }
+        }
+        let peak = under
+            .iter()
+            .map(|&cell| {
+                let logit = |c: usize| logits[c * cells + cell];
+                let max = (0..classes).map(logit).fold(f32::NEG_INFINITY, f32::max);
+                let sum: f32 = (0..classes).map(|c| (logit(c) - max).exp()).sum();
+                logit(class as usize) - max - sum.ln()
+            })
+            .fold(f32::NEG_INFINITY, f32::max);
+        let got = engine.region_probability(&ids, 3, class, bbox);
+        if under.is_empty() {
+            assert!(got.is_nan(), "round {round}: no pixels, {got}");
+        } else {
+            assert_eq!(got.to_bits(), peak.exp().to_bits(), "round {round}: {} cells", under.len());
+        }
+    }
+}
+
 #[test]
 fn engine_refuses_an_object_set_that_differs() {
     let set = object_set(&[l_block(), step_block()]);

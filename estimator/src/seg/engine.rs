@@ -643,12 +643,51 @@ impl SegEngine {
             return f32::NAN;
         }
         let mut best = f32::NEG_INFINITY;
-        let cells = self.for_region_cells(ids, id, bbox, |logit, cell| {
+        // A maximum: the cells may come in any order.
+        let cells = self.for_region_cells_by_cell(ids, id, bbox, |logit, cell| {
             // log softmax(class) = logit(class) − logsumexp(logits).
             let (max, sum) = softmax_terms(classes, |c| logit(c, cell));
             best = best.max(logit(class as usize, cell) - max - sum.ln());
         });
         if cells == 0 { f32::NAN } else { best.exp() }
+    }
+
+    /// The cells [`SegEngine::for_region_cells`] visits, in cell order: each
+    /// cell of the box's cell rectangle whose pixels inside the box include
+    /// one with `ids[p] == id`, found at the first such pixel (inside a region
+    /// that is the cell's first pixel, where the pixel-order walk reads all
+    /// of the cell's pixels). For reductions that do not depend on order.
+    fn for_region_cells_by_cell(
+        &self,
+        ids: &[u32],
+        id: u32,
+        bbox: [u16; 4],
+        mut visit: impl FnMut(&dyn Fn(usize, usize) -> f32, usize),
+    ) -> usize {
+        let Some(map) = self.map.as_ref() else { return 0 };
+        let (w, h) = map.frame_size();
+        let (out_w, out_h) = map.grid_size();
+        if ids.len() != w * h || out_w * out_h > MAX_CELLS {
+            return 0;
+        }
+        let cells = out_w * out_h;
+        let logit = |c: usize, cell: usize| self.logits[c * cells + cell];
+        let (u1, v1) = ((bbox[2] as usize).min(w - 1), (bbox[3] as usize).min(h - 1));
+        let (u0, v0) = ((bbox[0] as usize).min(u1), (bbox[1] as usize).min(v1));
+        let ((gx0, gy0), (gx1, gy1)) = (map.cell_of(u0, v0), map.cell_of(u1, v1));
+        let clip = |r: std::ops::Range<usize>, lo: usize, hi: usize| r.start.max(lo)..r.end.min(hi + 1);
+        let mut visited = 0;
+        for cy in gy0..=gy1 {
+            let rows = clip(map.span_y(cy), v0, v1);
+            for cx in gx0..=gx1 {
+                let cols = clip(map.span_x(cx), u0, u1);
+                if rows.clone().any(|v| ids[v * w + cols.start..v * w + cols.end.max(cols.start)].contains(&id)) {
+                    visit(&logit, cy * out_w + cx);
+                    visited += 1;
+                }
+            }
+        }
+        visited
     }
 
     /// The segmenter's mean softmax probability of each class (index 0 =
