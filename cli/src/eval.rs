@@ -142,9 +142,11 @@ pub struct Args {
     #[arg(long)]
     pub seg_background_offset: Option<f32>,
     /// `--masks net`: average the segmenter's logits over the frame and its
-    /// mirror image (twice its network's time). Default: the engine's, off.
+    /// mirror image (twice its network's time): `off`, `all` (every cell) or
+    /// `no-swap` (not where the two views pick two different objects).
+    /// Default: the engine's, off.
     #[arg(long)]
-    pub seg_flip_average: Option<bool>,
+    pub seg_flip_average: Option<fusepose_estimator::seg::FlipAverage>,
     /// `--masks net`: regroup the segmenter's cells by the depth image before
     /// its clean-up: cells standing on the table together that fit inside one
     /// object of their majority class take that class. `off`, `on`,

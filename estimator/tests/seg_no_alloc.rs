@@ -239,16 +239,55 @@ fn flip_averaged_logits_are_the_mean_of_the_frame_and_its_mirror_and_do_not_allo
     let own = engine.forward(&input).unwrap().to_vec();
     let mirrored = mirror(engine.forward(&mirror(&input, in_w)).unwrap(), out_w);
     assert_ne!(own, mirrored, "a lopsided input has logits of its own");
-    engine.set_flip_average(true);
+    engine.set_flip_average(fusepose_estimator::seg::FlipAverage::All);
     let averaged = engine.forward(&input).unwrap().to_vec();
     let expected: Vec<f32> = own.iter().zip(&mirrored).map(|(a, b)| 0.5 * (a + b)).collect();
     assert_eq!(averaged, expected);
+
+    // Without swaps: cells where the views pick two different objects keep
+    // the frame's own logits. The shipped segmenter (eight objects) on noisy
+    // inputs, until some cells disagree so.
+    use rand::{Rng, SeedableRng};
+    let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+    let builtin = fusepose_scene::builtin::builtin_objects();
+    let mut engine = SegEngine::load(&weights, &builtin).expect("the shipped model embeds a segmenter");
+    let mut rng = rand_pcg::Pcg64::seed_from_u64(8);
+    let cells = cfg.output_size().0 * out_w;
+    let mut swaps = 0;
+    for _ in 0..20 {
+        let noisy: Vec<f32> = input.iter().map(|v| v + rng.random_range(-2.0f32..2.0)).collect();
+        engine.set_flip_average(fusepose_estimator::seg::FlipAverage::Off);
+        let own = engine.forward(&noisy).unwrap().to_vec();
+        let mirrored = mirror(engine.forward(&mirror(&noisy, in_w)).unwrap(), out_w);
+        engine.set_flip_average(fusepose_estimator::seg::FlipAverage::NoSwap);
+        let no_swap = engine.forward(&noisy).unwrap().to_vec();
+        let classes = own.len() / cells;
+        let best = |l: &[f32], cell: usize| {
+            (1..classes).fold(0, |b, c| if l[c * cells + cell] > l[b * cells + cell] { c } else { b })
+        };
+        for cell in 0..cells {
+            let (o, m) = (best(&own, cell), best(&mirrored, cell));
+            let swap = o != 0 && m != 0 && o != m;
+            swaps += swap as usize;
+            for c in 0..classes {
+                let i = c * cells + cell;
+                let mean = 0.5 * (own[i] + mirrored[i]);
+                assert_eq!(no_swap[i], if swap { own[i] } else { mean }, "cell {cell} class {c}");
+            }
+        }
+        if swaps > 0 {
+            break;
+        }
+    }
+    assert!(swaps > 0, "no input made the views pick two different objects");
+    assert_eq!("no-swap".parse(), Ok(fusepose_estimator::seg::FlipAverage::NoSwap));
+    engine.set_flip_average(fusepose_estimator::seg::FlipAverage::NoSwap);
 
     let (c0, d0) = frame_planes(0);
     let mut labels = vec![0u16; 640 * 480];
     engine.segment(&view(&c0, &d0), &mut labels).unwrap();
     let n = allocations_in(|| engine.segment(&view(&c0, &d0), &mut labels).unwrap());
-    assert_eq!(n, 0, "flip-averaged segment allocated {n} times after warm-up");
+    assert_eq!(n, 0, "flip-averaged (no-swap) segment allocated {n} times after warm-up");
 }
 
 /// `region_probability` is the peak softmax probability of the class over

@@ -25,7 +25,7 @@ pub struct SegSettings {
     pub voting: Option<VotingMode>,
     pub background_offset: Option<f32>,
     /// Logits averaged with the mirror image's (`SegEngine::set_flip_average`).
-    pub flip_average: Option<bool>,
+    pub flip_average: Option<fusepose_estimator::seg::FlipAverage>,
     /// Cell labels regrouped by depth (`None` = off).
     pub depth_regions: Option<DepthRegionParams>,
 }
@@ -87,8 +87,8 @@ impl NetMasks {
         if let Some(o) = background_offset {
             engine.set_background_offset(o);
         }
-        if let Some(on) = flip_average {
-            engine.set_flip_average(on);
+        if let Some(mode) = flip_average {
+            engine.set_flip_average(mode);
         }
         if let Some(params) = depth_regions {
             let diameters = fusepose_estimator::parts::extents(objects, 1.0);

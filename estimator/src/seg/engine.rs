@@ -181,6 +181,39 @@ fn erode_boundaries(cells: &[u16], w: usize, out: &mut [u16]) {
 /// grid); a file with a larger grid gets NaN (not judged).
 const MAX_CELLS: usize = 160 * 120 + 64;
 
+/// How the segmenter combines a frame's logits with its mirror image's ([`SegEngine::set_flip_average`]).
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FlipAverage {
+    /// The frame's own logits only.
+    #[default]
+    Off,
+    /// The mean of both views' logits in every cell.
+    All,
+    /// The mean, except in cells where the two views pick two different
+    /// object classes: those keep the frame's own logits, so the mirror image
+    /// can move a cell between background and an object but never give it
+    /// another object's class.
+    NoSwap,
+}
+
+impl std::str::FromStr for FlipAverage {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "off" => Ok(Self::Off),
+            "all" => Ok(Self::All),
+            "no-swap" => Ok(Self::NoSwap),
+            _ => Err(format!("unknown flip-average mode `{s}`: expected off, all or no-swap")),
+        }
+    }
+}
+
+/// The class with the largest logit in `cell` (`logits`: `[classes, cells]`; the first maximum wins).
+fn argmax_at(logits: &[f32], cells: usize, classes: usize, cell: usize) -> usize {
+    (1..classes).fold(0, |best, c| if logits[c * cells + cell] > logits[best * cells + cell] { c } else { best })
+}
+
 /// Swaps left and right in every row of `width` values of `plane` (all channels).
 fn mirror_rows(plane: &mut [f32], width: usize) {
     plane.chunks_exact_mut(width).for_each(<[f32]>::reverse);
@@ -215,8 +248,8 @@ pub struct SegEngine {
     d1: Vec<f32>,
     /// `[K+1, H1*W1]`.
     logits: Vec<f32>,
-    /// Whether the logits average the frame's and its mirror image's ([`SegEngine::set_flip_average`]).
-    flip_average: bool,
+    /// Whether and how the logits average the frame's and its mirror image's ([`SegEngine::set_flip_average`]).
+    flip_average: FlipAverage,
     /// `[K+1, H1*W1]`: the mirror image's logits, mirrored back (empty while `flip_average` is off).
     mirrored_logits: Vec<f32>,
     /// `[d1, H1*W1]`: the offset branch's features when the file has it, else empty.
@@ -307,7 +340,7 @@ impl SegEngine {
             d2: vec![0.0; d2 * hw(2)],
             d1: vec![0.0; d1 * hw(1)],
             logits: vec![0.0; c.outputs() * hw(1)],
-            flip_average: false,
+            flip_average: FlipAverage::Off,
             mirrored_logits: Vec::new(),
             offsets: if c.offsets { vec![0.0; 2 * hw(1)] } else { Vec::new() },
             o1: if c.offsets && c.offset_branch { vec![0.0; d1 * hw(1)] } else { Vec::new() },
@@ -455,17 +488,20 @@ impl SegEngine {
     }
 
     /// Average the logits of the frame and of its mirror image (left and
-    /// right swapped, mirrored back), at twice the network's time per frame.
-    /// The segmenter was trained with horizontal flips, so both are inputs it
-    /// knows; where one view's colours mislead it the other may not. The
-    /// offset head's votes stay those of the frame itself. Default off.
-    pub fn set_flip_average(&mut self, on: bool) {
-        self.flip_average = on;
-        self.mirrored_logits = if on { vec![0.0; self.logits.len()] } else { Vec::new() };
+    /// right swapped, mirrored back), at twice the network's time per frame
+    /// ([`FlipAverage`]). The segmenter was trained with horizontal flips, so
+    /// both are inputs it knows. The offset head's votes stay those of the
+    /// frame itself. Default off.
+    pub fn set_flip_average(&mut self, mode: FlipAverage) {
+        self.flip_average = mode;
+        self.mirrored_logits = match mode {
+            FlipAverage::Off => Vec::new(),
+            _ => vec![0.0; self.logits.len()],
+        };
     }
 
-    /// Whether [`SegEngine::set_flip_average`] is on.
-    pub fn flip_average(&self) -> bool {
+    /// The [`SegEngine::set_flip_average`] mode.
+    pub fn flip_average(&self) -> FlipAverage {
         self.flip_average
     }
 
@@ -768,7 +804,7 @@ impl SegEngine {
     }
 
     fn run(&mut self) {
-        if !self.flip_average {
+        if self.flip_average == FlipAverage::Off {
             return self.run_once();
         }
         let s = self.config.sizes();
@@ -780,8 +816,20 @@ impl SegEngine {
         mirror_rows(&mut self.mirrored_logits, out_w);
         mirror_rows(&mut self.input, in_w);
         self.run_once();
-        for (l, m) in self.logits.iter_mut().zip(&self.mirrored_logits) {
-            *l = 0.5 * (*l + m);
+        let cells = s[1].0 * out_w;
+        let classes = self.logits.len() / cells.max(1);
+        for cell in 0..cells {
+            if self.flip_average == FlipAverage::NoSwap {
+                let own = argmax_at(&self.logits, cells, classes, cell);
+                let mirrored = argmax_at(&self.mirrored_logits, cells, classes, cell);
+                if own != 0 && mirrored != 0 && own != mirrored {
+                    continue;
+                }
+            }
+            for c in 0..classes {
+                let i = c * cells + cell;
+                self.logits[i] = 0.5 * (self.logits[i] + self.mirrored_logits[i]);
+            }
         }
     }
 

@@ -21,7 +21,7 @@ pub mod voting;
 pub use boundary::Boundary;
 pub use config::SegConfig;
 pub use depth_regions::{DepthRegionParams, DepthRegions};
-pub use engine::{SegEngine, SegError};
+pub use engine::{FlipAverage, SegEngine, SegError};
 pub use file::SegFile;
 pub use input::FrameMap;
 pub use voting::{VotingMode, VotingParams};
