@@ -688,6 +688,19 @@ impl SegEngine {
         if cells == 0 { f32::NAN } else { best.exp() }
     }
 
+    /// The last segmentation's frame map and `bbox` clamped to the frame
+    /// ([u0, v0, u1, v1], inclusive), when there is one and `ids` has its size.
+    fn region_box(&self, ids: &[u32], bbox: [u16; 4]) -> Option<(&FrameMap, [usize; 4])> {
+        let map = self.map.as_ref()?;
+        let (w, h) = map.frame_size();
+        if ids.len() != w * h || map.cells() > MAX_CELLS {
+            return None;
+        }
+        let (u1, v1) = ((bbox[2] as usize).min(w - 1), (bbox[3] as usize).min(h - 1));
+        let (u0, v0) = ((bbox[0] as usize).min(u1), (bbox[1] as usize).min(v1));
+        Some((map, [u0, v0, u1, v1]))
+    }
+
     /// The cells [`SegEngine::for_region_cells`] visits, in cell order: each
     /// cell of the box's cell rectangle whose pixels inside the box include
     /// one with `ids[p] == id`, found at the first such pixel (inside a region
@@ -700,16 +713,9 @@ impl SegEngine {
         bbox: [u16; 4],
         mut visit: impl FnMut(&dyn Fn(usize, usize) -> f32, usize),
     ) -> usize {
-        let Some(map) = self.map.as_ref() else { return 0 };
-        let (w, h) = map.frame_size();
-        let (out_w, out_h) = map.grid_size();
-        if ids.len() != w * h || out_w * out_h > MAX_CELLS {
-            return 0;
-        }
-        let cells = out_w * out_h;
+        let Some((map, [u0, v0, u1, v1])) = self.region_box(ids, bbox) else { return 0 };
+        let ((w, _), (out_w, _), cells) = (map.frame_size(), map.grid_size(), map.cells());
         let logit = |c: usize, cell: usize| self.logits[c * cells + cell];
-        let (u1, v1) = ((bbox[2] as usize).min(w - 1), (bbox[3] as usize).min(h - 1));
-        let (u0, v0) = ((bbox[0] as usize).min(u1), (bbox[1] as usize).min(v1));
         let ((gx0, gy0), (gx1, gy1)) = (map.cell_of(u0, v0), map.cell_of(u1, v1));
         let clip = |r: std::ops::Range<usize>, lo: usize, hi: usize| r.start.max(lo)..r.end.min(hi + 1);
         let mut visited = 0;
@@ -759,18 +765,11 @@ impl SegEngine {
         bbox: [u16; 4],
         mut visit: impl FnMut(&dyn Fn(usize, usize) -> f32, usize),
     ) -> usize {
-        let Some(map) = self.map.as_ref() else { return 0 };
-        let (w, h) = map.frame_size();
-        let (out_w, out_h) = map.grid_size();
-        if ids.len() != w * h || out_w * out_h > MAX_CELLS {
-            return 0;
-        }
-        let cells = out_w * out_h;
+        let Some((map, [u0, v0, u1, v1])) = self.region_box(ids, bbox) else { return 0 };
+        let ((w, _), (out_w, _), cells) = (map.frame_size(), map.grid_size(), map.cells());
         let logit = |c: usize, cell: usize| self.logits[c * cells + cell];
         // Each cell under the region once (a frame row crosses the same cells
         // as the rows above it): a bit per cell of the box's cell rectangle.
-        let (u1, v1) = ((bbox[2] as usize).min(w - 1), (bbox[3] as usize).min(h - 1));
-        let (u0, v0) = ((bbox[0] as usize).min(u1), (bbox[1] as usize).min(v1));
         let ((gx0, gy0), (gx1, _)) = (map.cell_of(u0, v0), map.cell_of(u1, v1));
         let span = gx1 + 1 - gx0;
         let mut seen = [0u64; MAX_CELLS / 64];
