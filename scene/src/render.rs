@@ -40,7 +40,7 @@ mod target;
 
 pub use camera_pipeline::{Blur, CameraEffects, apply_camera_effects};
 pub use modes::{DepthSensor, ParseModeError, Randomize};
-pub use noise::{NoiseConfig, apply_noise, apply_noise_colour, apply_noise_depth};
+pub use noise::{GAUSS_BITS, NoiseConfig, apply_noise, apply_noise_colour, apply_noise_depth, gauss_table};
 pub use sensor::{DepthSensorModel, StructuredLightParams, TofParams, apply_depth_sensor, apply_depth_sensor_model};
 pub use target::{ItemCoverage, PixelBox, RenderTarget};
 

@@ -81,11 +81,11 @@ impl NoiseConfig {
 }
 
 /// Bits of the Gaussian table index.
-pub(super) const GAUSS_BITS: u32 = 12;
+pub const GAUSS_BITS: u32 = 12;
 
 /// 4096 equiprobable standard-normal values (inverse CDF at bin midpoints,
 /// rescaled to unit variance): a table lookup per sample instead of Box–Muller.
-pub(super) fn gauss_table() -> &'static [f32; 1 << GAUSS_BITS] {
+pub fn gauss_table() -> &'static [f32; 1 << GAUSS_BITS] {
     static T: OnceLock<[f32; 1 << GAUSS_BITS]> = OnceLock::new();
     T.get_or_init(|| {
         let n = 1usize << GAUSS_BITS;
