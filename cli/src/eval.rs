@@ -1335,28 +1335,34 @@ fn nearest_error(gt: &[GtObject], p: &ObjectPose, metrics: &[ObjectMetric], diam
         .fold(f64::INFINITY, f64::min)
 }
 
-/// Pairs each ground-truth object with an estimate of its class (greedy, by
-/// translation distance; each estimate used once), or `None`.
+/// Pairs each ground-truth object with an estimate of its class, or `None`:
+/// closest pairs first (by translation distance; each estimate and each object
+/// used once), so the result does not depend on the order the objects are
+/// listed in. Taking the objects in list order instead let an object whose
+/// own estimate was far off take a touching copy's good estimate, leaving
+/// that copy the far one.
 fn match_estimates<'a>(gt: &'a [GtObject], poses: &'a [ObjectPose]) -> Vec<(&'a GtObject, Option<&'a ObjectPose>)> {
-    let mut used = vec![false; poses.len()];
-    gt.iter()
-        .map(|g| {
-            let best = poses
+    let mut candidates: Vec<(f64, usize, usize)> = gt
+        .iter()
+        .enumerate()
+        .flat_map(|(g, o)| {
+            poses
                 .iter()
                 .enumerate()
-                .filter(|(i, p)| !used[*i] && p.class_id == g.class_id)
-                .min_by(|(_, a), (_, b)| {
-                    let da = (a.translation - g.pose.translation.vector).norm();
-                    let db = (b.translation - g.pose.translation.vector).norm();
-                    da.total_cmp(&db)
-                })
-                .map(|(i, _)| i);
-            if let Some(i) = best {
-                used[i] = true;
-            }
-            (g, best.map(|i| &poses[i]))
+                .filter(move |(_, p)| p.class_id == o.class_id)
+                .map(move |(e, p)| ((p.translation - o.pose.translation.vector).norm(), g, e))
         })
-        .collect()
+        .collect();
+    candidates.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2)));
+    let mut of_gt: Vec<Option<usize>> = vec![None; gt.len()];
+    let mut used = vec![false; poses.len()];
+    for (_, g, e) in candidates {
+        if of_gt[g].is_none() && !used[e] {
+            of_gt[g] = Some(e);
+            used[e] = true;
+        }
+    }
+    gt.iter().zip(of_gt).map(|(g, e)| (g, e.map(|i| &poses[i]))).collect()
 }
 
 fn pose_of(p: &ObjectPose) -> Pose {
@@ -1436,6 +1442,27 @@ mod tests {
         assert_eq!(m[0].1.map(|p| p.translation.x), Some(0.11));
         assert_eq!(m[1].1.map(|p| p.translation.x), Some(-0.09));
         assert!(m[2].1.is_none(), "class 2 has no estimate: a miss");
+    }
+
+    #[test]
+    fn matching_takes_the_closest_pairs_first_whatever_the_listing_order() {
+        // Two touching copies 0.1 m apart: the second copy's estimate is 1 cm
+        // off, the first copy's 0.25 m off (on the far side). Taken in list
+        // order, the first copy would grab the second's estimate (0.09 m from
+        // it) and leave the second copy the far one.
+        let gt = [
+            GtObject { class_id: 1, pose: Pose::translation(0.0, 0.0, 0.5), visible: None },
+            GtObject { class_id: 1, pose: Pose::translation(0.1, 0.0, 0.5), visible: None },
+        ];
+        let poses = [at(1, -0.25), at(1, 0.09)];
+        for order in [[0, 1], [1, 0]] {
+            let listed: Vec<GtObject> = order.iter().map(|&i| gt[i].clone()).collect();
+            let m = match_estimates(&listed, &poses);
+            for (g, e) in m {
+                let want = if g.pose.translation.vector.x > 0.05 { 0.09 } else { -0.25 };
+                assert_eq!(e.map(|p| p.translation.x), Some(want), "copy at x = {}", g.pose.translation.vector.x);
+            }
+        }
     }
 
     #[test]
