@@ -281,11 +281,6 @@ pub struct Args {
     /// at least this (0 = any passing pose).
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit)]
     pub recut_min_piece_fit: f32,
-    /// `--recut`: a refused cut with one piece taken as a copy, in a region
-    /// whose own pose failed, keeps that copy's pose, as the daemon's
-    /// `estimator.recut_single_copy`.
-    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.single_copy, action = clap::ArgAction::Set)]
-    pub recut_single_copy: bool,
     /// Second masks for failed poses: at most this many per frame get the
     /// pixels inside their posed box (grown by `--remask-margin`) as a new
     /// mask and are estimated again, kept when the new pose passes (0 =
@@ -695,7 +690,6 @@ impl Runner {
                     refit: args.recut_refit,
                     refit_by_verdict: args.recut_refit_by_verdict,
                     min_piece_fit: args.recut_min_piece_fit,
-                    single_copy: args.recut_single_copy,
                     ..fusepose_estimator::recut::RecutConfig::DEFAULT
                 };
                 if recut_config.is_on() && args.verify != "off" {
@@ -1026,7 +1020,7 @@ impl Runner {
             ) {
                 Ok(s) => {
                     self.recut_stats += s;
-                    if s.kept > 0 || s.single > 0 {
+                    if s.kept > 0 {
                         verdicts = all.into_iter().map(Some).collect();
                         passed = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
                     }
@@ -1240,12 +1234,11 @@ impl Runner {
             );
         }
         if self.recut.is_some() {
-            let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, refused, single, .. } = self.recut_stats;
+            let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, refused, .. } = self.recut_stats;
             let [unverified, close, explained, overlap] = refused;
             println!(
                 "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes), {kept} kept (as two or more copies); \
-                 refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap; \
-                 {single} refused regions kept their one copy"
+                 refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap"
             );
         }
         if self.remask.is_some() {

@@ -188,13 +188,6 @@ pub struct RecutConfig {
     /// copies gets a pose between them that passes on its neighbours'
     /// surfaces with a low fit. 0 = any passing pose.
     pub min_piece_fit: f32,
-    /// A refused cut with exactly one piece taken as a copy, in a region
-    /// whose own pose failed verification, keeps that copy: the piece is cut
-    /// off the region as an instance with its pose. Else the region loses
-    /// every pose (its one pose lay between two copies and failed, and the
-    /// other piece's pose failed too), and a copy the depth image supports
-    /// is lost.
-    pub single_copy: bool,
 }
 
 /// Which poses' regions the second look takes ([`RecutConfig::poses`]).
@@ -253,7 +246,6 @@ impl RecutConfig {
         refit: true,
         refit_by_verdict: false,
         min_piece_fit: 0.0,
-        single_copy: false,
     };
 
     pub fn is_on(&self) -> bool {
@@ -304,9 +296,6 @@ pub struct RecutStats {
     /// a piece without a pose or whose pose failed verification, poses too
     /// close, one pose explaining the other's piece, solids overlapping.
     pub refused: [usize; 4],
-    /// Of the refused cuts, regions whose failed pose gave way to their one
-    /// copy ([`RecutConfig::single_copy`]).
-    pub single: usize,
 }
 
 /// Totals over frames (an evaluation's counts).
@@ -321,7 +310,6 @@ impl std::ops::AddAssign for RecutStats {
         for (r, n) in self.refused.iter_mut().zip(o.refused) {
             *r += n;
         }
-        self.single += o.single;
     }
 }
 
@@ -382,8 +370,6 @@ pub struct Recut {
     defer: Option<()>,
     /// Cuts refused in this frame's [`Recut::run`], by [`Refusal`].
     refusals: [usize; 4],
-    /// Refused cuts of this frame that kept their one copy.
-    singles: usize,
     /// Cuts the next frame refused, per class and midpoint, with the frames
     /// for which no region there is cut again without its pieces' poses.
     refused: Vec<Refused>,
@@ -432,7 +418,6 @@ impl Recut {
             frame_budget: None,
             defer: None,
             refusals: [0; 4],
-            singles: 0,
             refused: Vec::with_capacity(ws_config.max_instances),
             carried: Vec::with_capacity(ws_config.max_instances),
         })
@@ -504,7 +489,6 @@ impl Recut {
     ) -> Result<RecutStats, EstimateError> {
         let mut stats = RecutStats::default();
         self.refusals = [0; 4];
-        self.singles = 0;
         // What stood in the last frame is carried only into the next.
         self.carried.clear();
         for r in &mut self.refused {
@@ -563,7 +547,6 @@ impl Recut {
         stats.kept =
             self.with_pieces(frame, |this, view, ids| this.apply(frame, view, verifier, ids, ws, poses, verdicts));
         stats.refused = self.refusals;
-        stats.single = self.singles;
         Ok(stats)
     }
 
@@ -1061,15 +1044,15 @@ impl Recut {
     /// its pose (index in `self.poses`): best fit first, a piece is taken
     /// when its pose passed verification and it is two copies
     /// ([`Terms::two_copies`]) with each piece taken before it. Returns how
-    /// many (in piece order), or why fewer than two (the first refusal met,
-    /// else [`Refusal::Unverified`]) with how many were taken (0 or 1).
+    /// many (in piece order), or why fewer than two: the first refusal met,
+    /// else [`Refusal::Unverified`].
     fn copies(
         &self,
         j: usize,
         view: &FrameView<'_>,
         verifier: &mut Verifier,
         taken: &mut [(usize, usize); MAX_CUT_PIECES],
-    ) -> Result<usize, (Refusal, usize)> {
+    ) -> Result<usize, Refusal> {
         let c = self.candidates[j];
         let mut passed = [(0.0f32, 0usize, 0usize); MAX_CUT_PIECES];
         let mut n = 0;
@@ -1105,7 +1088,7 @@ impl Recut {
         }
         // In piece order: the first piece's copy keeps the region's instance.
         taken[..count].sort_unstable_by_key(|t| t.0);
-        if count >= 2 { Ok(count) } else { Err((first.unwrap_or(Refusal::Unverified), count)) }
+        if count >= 2 { Ok(count) } else { Err(first.unwrap_or(Refusal::Unverified)) }
     }
 
     /// Keeps the cuts the depth image supports; returns how many. The
@@ -1132,11 +1115,8 @@ impl Recut {
             let mut taken = [(0usize, 0usize); MAX_CUT_PIECES];
             let count = match self.copies(j, view, verifier, &mut taken) {
                 Ok(count) => count,
-                Err((why, found)) => {
+                Err(why) => {
                     self.refusals[why as usize] += 1;
-                    if self.config.single_copy && found == 1 && !verdicts[whole].passed {
-                        self.keep_single_copy(frame, ids, j, taken[0], ws, poses, verdicts);
-                    }
                     continue;
                 }
             };
@@ -1201,37 +1181,6 @@ impl Recut {
             crate::poses::remove_marked(verdicts, &self.marks);
         }
         kept
-    }
-}
-
-impl Recut {
-    /// [`RecutConfig::single_copy`]: cuts piece `k` of candidate `j` off its
-    /// region as an instance with the piece's pose `a` and its verdict; the
-    /// region keeps its failed pose (dropped or flagged as any failed pose).
-    #[allow(clippy::too_many_arguments)]
-    fn keep_single_copy(
-        &mut self,
-        frame: &FrameView<'_>,
-        ids: &[u16],
-        j: usize,
-        (k, a): (usize, usize),
-        ws: &mut Workspace,
-        poses: &mut PoseSet,
-        verdicts: &mut Vec<Verification>,
-    ) {
-        let c = self.candidates[j];
-        if poses.len() >= poses.capacity() || ws.instances.len() >= ws.config.max_instances {
-            return;
-        }
-        let i = poses.as_slice()[c.pose].instance_id as usize;
-        let id = c.base + 1 + k as u16;
-        let Some(new) = ws.cut_instance(frame, i, |p| usize::from(ids.get(p) == Some(&id))) else { return };
-        let inst = ws.instances[new];
-        let pose = self.poses.as_slice()[a];
-        poses.push(ObjectPose { instance_id: new as u16, bbox: inst.bbox, mask_pixels: inst.pixels, ..pose });
-        verdicts.push(self.verdicts[a]);
-        self.marks.push(false);
-        self.singles += 1;
     }
 }
 
