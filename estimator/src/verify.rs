@@ -409,21 +409,20 @@ impl Verifier {
                     .iter()
                     .filter_map(|p| project(p).map(|(u, v, z)| (u, v, z, p)))
                     .filter(|&(u, v, _, _)| u >= u0 && v >= v0 && u <= u1 && v <= v1)
-                    .filter_map(|(u, v, z, p)| {
+                    .filter(|&(u, v, z, _)| {
                         let (pu, pv) = (u.round() as usize, v.round() as usize);
-                        let tol = cfg.tolerance_base_m + cfg.tolerance_per_m * z;
-                        let res = frame.depth.metres(pv * w + pu).map(|z_obs| z_obs - z).filter(|&r| r >= -tol)?;
-                        Some((res > tol, p))
+                        frame
+                            .depth
+                            .metres(pv * w + pu)
+                            .is_some_and(|z_obs| z_obs - z >= -(cfg.tolerance_base_m + cfg.tolerance_per_m * z))
                     })
-                    .map(|(seen_through, p)| {
+                    .map(|(_, _, _, p)| {
                         let x = [
                             m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0],
                             m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1],
                             m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2],
                         ];
-                        // A sample the depth agrees with is on a real surface,
-                        // whatever share of it the mask drew.
-                        (seen_through && (n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() > OFF_PLANE_M) as u32
+                        ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() > OFF_PLANE_M) as u32
                     })
                     .fold((0u32, 0u32), |(o, a), f| (o + f, a + 1));
                 if off.1 > 0 { off.0 as f32 / off.1 as f32 } else { 0.0 }
