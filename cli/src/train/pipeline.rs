@@ -187,10 +187,9 @@ fn trained_seconds(path: &Path) -> anyhow::Result<f64> {
 }
 
 /// The two acceptance splits: plain scenes (no randomisation, 3–8 objects,
-/// so a set of fewer classes repeats some: comparable with the project's
-/// own test splits) and
-/// randomised ones (lights, tables, distractors, pairs and heaps: closer to a
-/// real cell), as (folder name, render flags, description).
+/// so a set of fewer classes repeats some: comparable with the project's own
+/// test splits) and randomised ones (lights, tables, distractors, pairs and
+/// heaps: closer to a real cell), as (folder name, render flags, description).
 const SPLITS: [(&str, &[&str], &str); 2] = [
     ("accept-plain", &["--randomize", "off"], "plain scenes, 3-8 objects (a class repeats where the set has fewer)"),
     ("accept-randomized", &[], "randomised scenes with touching pairs and heaps"),
