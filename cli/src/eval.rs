@@ -147,6 +147,13 @@ pub struct Args {
     /// Default: the engine's, off.
     #[arg(long)]
     pub seg_flip_average: Option<fusepose_estimator::seg::FlipAverage>,
+    /// `--masks net`: a second segmenter (a network file with one embedded, or
+    /// a segmenter file) whose logits are averaged with the first one's.
+    #[arg(long)]
+    pub seg_partner: Option<PathBuf>,
+    /// `--seg-partner`'s share of the averaged logits (0..=1).
+    #[arg(long, default_value_t = 0.5)]
+    pub seg_partner_weight: f32,
     /// `--masks net`: regroup the segmenter's cells by the depth image before
     /// its clean-up: cells standing on the table together that fit inside one
     /// object of their majority class take that class. `off`, `on`,
@@ -445,6 +452,9 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
             Some(NetMasks::load(&weights, &objects, &settings)?)
         }
     };
+    if let (Some(m), Some(partner)) = (net_masks.as_mut(), &args.seg_partner) {
+        m.set_partner(partner, args.seg_partner_weight, &objects)?;
+    }
     if let Some(m) = net_masks.as_mut() {
         m.set_instance_separation(fusepose_estimator::duplicates::separations(&objects, args.duplicates));
     }

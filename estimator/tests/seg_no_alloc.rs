@@ -290,6 +290,48 @@ fn flip_averaged_logits_are_the_mean_of_the_frame_and_its_mirror_and_do_not_allo
     assert_eq!(n, 0, "flip-averaged (no-swap) segment allocated {n} times after warm-up");
 }
 
+/// A partner segmenter's logits are mixed in at its weight, after the
+/// engine's own, without allocating; one of another shape or a weight
+/// outside 0..=1 is refused by name.
+#[test]
+fn a_partner_segmenters_logits_are_mixed_in_at_its_weight() {
+    let weights = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+    let builtin = fusepose_scene::builtin::builtin_objects();
+    let mut engine = SegEngine::load(&weights, &builtin).expect("the shipped model embeds a segmenter");
+    let cfg = engine.config().clone();
+    let partner_file = || SegFile::from_bytes(&weight_bytes(&cfg, &builtin)).unwrap();
+    let mut partner = SegEngine::new(&partner_file()).unwrap();
+    let input: Vec<f32> =
+        (0..4 * cfg.input_height * cfg.input_width).map(|i| ((i * 7919) % 1000) as f32 / 500.0 - 1.0).collect();
+    let own = engine.forward(&input).unwrap().to_vec();
+    let other = partner.forward(&input).unwrap().to_vec();
+    assert_ne!(own, other, "two different segmenters give different logits");
+
+    let small = object_set(&[l_block(), step_block()]);
+    let mismatched =
+        SegEngine::new(&SegFile::from_bytes(&weight_bytes(&SegConfig::new(small.len()), &small)).unwrap()).unwrap();
+    let err = engine.set_partner(mismatched, 0.5).unwrap_err();
+    assert!(
+        matches!(err, fusepose_estimator::seg::SegError::PartnerMismatch { outputs: 9, partner_outputs: 3, .. }),
+        "{err}"
+    );
+    let err = engine.set_partner(SegEngine::new(&partner_file()).unwrap(), 1.5).unwrap_err();
+    assert!(err.to_string().contains("1.5"), "{err}");
+    assert_eq!(engine.forward(&input).unwrap(), &own[..], "a refused partner leaves the logits alone");
+
+    engine.set_partner(partner, 0.25).unwrap();
+    let mixed = engine.forward(&input).unwrap().to_vec();
+    for (i, ((m, a), b)) in mixed.iter().zip(&own).zip(&other).enumerate() {
+        assert_eq!(*m, 0.75 * a + 0.25 * b, "logit {i}");
+    }
+
+    let (c0, d0) = frame_planes(0);
+    let mut labels = vec![0u16; 640 * 480];
+    engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    let n = allocations_in(|| engine.segment(&view(&c0, &d0), &mut labels).unwrap());
+    assert_eq!(n, 0, "segment with a partner allocated {n} times after warm-up");
+}
+
 /// `region_probability` is the peak softmax probability of the class over
 /// the cells under the region's pixels inside the box: checked against that
 /// definition, pixel by pixel, for blobs and boxes that cut through them.

@@ -54,6 +54,14 @@ impl NetMasks {
         self.engine.set_instance_separation(separation);
     }
 
+    /// Averages the segmenter's logits with the one in `partner` (`SegEngine::set_partner`).
+    pub fn set_partner(&mut self, partner: &Path, weight: f32, objects: &ObjectSet) -> anyhow::Result<()> {
+        let engine = SegEngine::load(partner, objects)
+            .with_context(|| format!("--seg-partner: loading the segmenter of {}", partner.display()))?;
+        self.engine.set_partner(engine, weight).with_context(|| format!("--seg-partner {}", partner.display()))?;
+        Ok(())
+    }
+
     /// Loads the segmenter of `weights` (a network file with one embedded, or
     /// a segmenter file) with `settings` applied over the engine's defaults.
     pub fn load(weights: &Path, objects: &ObjectSet, settings: &SegSettings) -> anyhow::Result<Self> {

@@ -33,6 +33,13 @@ pub enum SegError {
     OutputLength { got: usize, expected: usize },
     #[error("network input has {got} values, expected {expected}")]
     InputLength { got: usize, expected: usize },
+    #[error(
+        "the partner segmenter reads {partner_input:?} px into {partner_outputs} outputs, this one \
+         {input:?} px into {outputs}: averaging needs the same input size and objects"
+    )]
+    PartnerMismatch { input: (usize, usize), outputs: usize, partner_input: (usize, usize), partner_outputs: usize },
+    #[error("partner weight {0} is outside 0..=1")]
+    PartnerWeight(f32),
 }
 
 /// One layer's weights: `[O, I*k*k]` and bias `[O]`.
@@ -252,6 +259,8 @@ pub struct SegEngine {
     flip_average: FlipAverage,
     /// `[K+1, H1*W1]`: the mirror image's logits, mirrored back (empty while `flip_average` is off).
     mirrored_logits: Vec<f32>,
+    /// A second segmenter and its share of the averaged logits ([`SegEngine::set_partner`]).
+    partner: Option<(Box<SegEngine>, f32)>,
     /// `[d1, H1*W1]`: the offset branch's features when the file has it, else empty.
     o1: Vec<f32>,
     /// Whether `offsets` are not yet those of the last forward pass ([`SegEngine::compute_votes`]).
@@ -342,6 +351,7 @@ impl SegEngine {
             logits: vec![0.0; c.outputs() * hw(1)],
             flip_average: FlipAverage::Off,
             mirrored_logits: Vec::new(),
+            partner: None,
             offsets: if c.offsets { vec![0.0; 2 * hw(1)] } else { Vec::new() },
             o1: if c.offsets && c.offset_branch { vec![0.0; d1 * hw(1)] } else { Vec::new() },
             votes_pending: false,
@@ -498,6 +508,29 @@ impl SegEngine {
             FlipAverage::Off => Vec::new(),
             _ => vec![0.0; self.logits.len()],
         };
+    }
+
+    /// Averages this segmenter's logits with a second one's, `weight` its
+    /// share (0..=1): two segmenters trained on different images err in
+    /// different places. Everything downstream (labels, region probability,
+    /// certainty floor) reads the averaged logits; the votes stay this one's.
+    pub fn set_partner(&mut self, partner: SegEngine, weight: f32) -> Result<(), SegError> {
+        if !(0.0..=1.0).contains(&weight) {
+            return Err(SegError::PartnerWeight(weight));
+        }
+        let (a, b) = (&self.config, &partner.config);
+        if (a.input_width, a.input_height, a.outputs()) != (b.input_width, b.input_height, b.outputs())
+            || partner.logits.len() != self.logits.len()
+        {
+            return Err(SegError::PartnerMismatch {
+                input: (a.input_width, a.input_height),
+                outputs: a.outputs(),
+                partner_input: (b.input_width, b.input_height),
+                partner_outputs: b.outputs(),
+            });
+        }
+        self.partner = Some((Box::new(partner), weight));
+        Ok(())
     }
 
     /// The [`SegEngine::set_flip_average`] mode.
@@ -803,6 +836,18 @@ impl SegEngine {
     }
 
     fn run(&mut self) {
+        self.run_own();
+        if let Some((partner, w)) = self.partner.as_mut() {
+            partner.input.copy_from_slice(&self.input);
+            partner.run();
+            for (own, &other) in self.logits.iter_mut().zip(&partner.logits) {
+                *own = (1.0 - *w) * *own + *w * other;
+            }
+        }
+    }
+
+    /// This segmenter's logits (with its mirror image's where set).
+    fn run_own(&mut self) {
         if self.flip_average == FlipAverage::Off {
             return self.run_once();
         }
