@@ -349,6 +349,10 @@ pub struct Args {
     /// `estimator.verify_trim_table_share` (above 1 = off).
     #[arg(long)]
     pub verify_trim_table_share: Option<f32>,
+    /// Poses with more than this share of their surface samples 3 cm or more
+    /// below the support plane fail (above 1 = off).
+    #[arg(long)]
+    pub verify_max_below_support: Option<f32>,
     /// `--masks net`: poses whose region the segmenter nowhere gave their
     /// class a probability of at least this fail (0 = off).
     #[arg(long)]
@@ -794,6 +798,7 @@ impl Runner {
                         agreeing_min_fit: args.verify_agreeing_min_fit.unwrap_or(d.agreeing_min_fit),
                         min_region_probability: min_region.max(region_floor),
                         trim_table_share: args.verify_trim_table_share.unwrap_or(d.trim_table_share),
+                        max_below_support: args.verify_max_below_support.unwrap_or(d.max_below_support),
                         ..d
                     },
                 )
@@ -1109,7 +1114,7 @@ impl Runner {
                         !before.contains(&p.translation.into()) as u8
                     };
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
+                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} below {:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -1117,6 +1122,7 @@ impl Runner {
                         p.mask_pixels,
                         p.translation.z,
                         add_s.map_or(-1.0, |a| a),
+                        v.below_support,
                         v.inlier_fraction,
                         v.mask_coverage,
                         v.behind_fraction,

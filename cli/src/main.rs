@@ -42,9 +42,9 @@ enum Command {
     /// Inspect or export object sets.
     Objects(objects::Args),
     /// Train the fusion network (and refiner, segmenter).
-    Train(train::Args),
+    Train(Box<train::Args>),
     /// Evaluate an estimator on a BOP or YCB-Video dataset.
-    Eval(eval::Args),
+    Eval(Box<eval::Args>),
     /// Run daemon, synthetic camera and consumer together and show live results.
     Demo(demo::Args),
     /// (internal) The demo's daemon process.
@@ -66,8 +66,8 @@ fn main() {
         Command::Stats(a) => stats::run(a),
         Command::Render(a) => render::run(a),
         Command::Objects(a) => objects::run(a),
-        Command::Train(a) => train::run(a),
-        Command::Eval(a) => eval::run(a),
+        Command::Train(a) => train::run(*a),
+        Command::Eval(a) => eval::run(*a),
         Command::Demo(a) => demo::run(a),
         Command::DemoDaemon(a) => demo::run_daemon(a),
         Command::DemoConsumer(a) => demo::run_consumer(a),

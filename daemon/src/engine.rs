@@ -197,6 +197,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
                 agreeing_mask_agreement: config.verify_agreeing_mask_agreement,
                 min_region_probability: config.verify_min_region_probability,
                 trim_table_share: config.verify_trim_table_share,
+                max_below_support: config.verify_max_below_support,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));

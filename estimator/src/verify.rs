@@ -133,6 +133,14 @@ pub struct VerifyConfig {
     /// [`THIN_OBJECT_M`] are never judged so (they lie within the table's
     /// height band). Above 1 = off.
     pub trim_table_share: f32,
+    /// Poses with more than this share of their surface samples more than
+    /// [`Self::below_support_m`] below the support plane
+    /// ([`Verifier::set_support`]) fail: a solid object cannot stand inside
+    /// the table. A made-up pose can hide there, its one face flush with the
+    /// table and the rest "behind" the measured surface, where depth cannot
+    /// refuse it. Above 1 = off.
+    pub max_below_support: f32,
+    pub below_support_m: f32,
 }
 
 impl Default for VerifyConfig {
@@ -157,6 +165,8 @@ impl Default for VerifyConfig {
             agreeing_min_diameter_m: 0.15,
             min_region_probability: 0.0,
             trim_table_share: 0.5,
+            max_below_support: 2.0,
+            below_support_m: 0.03,
         }
     }
 }
@@ -194,6 +204,9 @@ pub struct Verification {
     /// The segmenter's peak probability of the pose's class in its region
     /// ([`Verification::judge_region_probability`]); NaN when not judged.
     pub region_probability: f32,
+    /// Share of the model's surface samples below the support plane
+    /// ([`VerifyConfig::max_below_support`]); 0 without a plane.
+    pub below_support: f32,
     /// Samples judged (inliers + outliers).
     pub judged_cells: u32,
     /// Whether the pose passed every threshold of [`VerifyConfig`] (depth
@@ -232,6 +245,8 @@ pub struct Verifier {
     /// A region's pixels off the table ([`VerifyConfig::trim_table_share`]);
     /// zero outside the call that writes it. Sized at the first frame.
     off_table: Vec<u32>,
+    /// The frame's support plane ([`Verifier::set_support`]).
+    support: Option<crate::support::SupportPlane>,
 }
 
 /// Objects whose thinnest extent is below this (metres) step off a table by
@@ -275,11 +290,36 @@ impl Verifier {
                 .collect(),
             samples,
             off_table: Vec::new(),
+            support: None,
         }
+    }
+
+    /// The plane the frame's objects stand on (`Workspace::support_plane`),
+    /// for [`VerifyConfig::max_below_support`]; [`verify_on_region`] sets it
+    /// from its workspace, so every later check of the frame (cut pieces,
+    /// second masks) judges against the same plane.
+    pub fn set_support(&mut self, plane: Option<crate::support::SupportPlane>) {
+        self.support = plane;
     }
 
     pub fn config(&self) -> &VerifyConfig {
         &self.config
+    }
+
+    /// Share of the pose's surface samples lying more than `depth_m` below
+    /// `plane` (the surface the objects stand on): a solid object cannot
+    /// stand inside the table. NaN for an unknown class.
+    pub fn below_support(&self, pose: &ObjectPose, plane: &crate::support::SupportPlane, depth_m: f32) -> f32 {
+        let Some(samples) = (pose.class_id as usize).checked_sub(1).and_then(|i| self.samples.get(i)) else {
+            return f32::NAN;
+        };
+        let m = pose.rotation.to_rotation_matrix().matrix().map(|v| v as f32);
+        let t = pose.translation.map(|v| v as f32);
+        let below = samples
+            .iter()
+            .filter(|s| plane.height(&(m * nalgebra::Vector3::new(s[0], s[1], s[2]) + t)) < -depth_m)
+            .count();
+        below as f32 / samples.len().max(1) as f32
     }
 
     /// Checks `pose` against the frame's depth and the instance mask.
@@ -430,6 +470,8 @@ impl Verifier {
             _ => 0.0,
         };
         let fit = inlier_fraction * mask_coverage * (1.0 - behind_fraction) * (1.0 - off_plane);
+        let below_support =
+            self.support.map_or(0.0, |plane| self.below_support(pose, &plane, self.config.below_support_m));
         let mut verdict = Verification {
             fit,
             depth_residual_m,
@@ -442,6 +484,7 @@ impl Verifier {
             depth_continuity,
             mask_agreement,
             region_probability: f32::NAN,
+            below_support,
             judged_cells: judged,
             passed: false,
         };
@@ -470,6 +513,7 @@ impl Verifier {
             && v.depth_residual_m <= cfg.max_residual_m
             && v.depth_support >= cfg.min_depth_support
             && v.plane_continuation <= cfg.max_plane_continuation
+            && v.below_support <= cfg.max_below_support
             && if self.thin[class] {
                 v.mask_agreement >= cfg.min_thin_mask_agreement
             } else {
@@ -603,6 +647,7 @@ pub fn verify_on_region(
     segmenter: Option<&crate::seg::SegEngine>,
     pose: &ObjectPose,
 ) -> Option<Verification> {
+    verifier.set_support(ws.support_plane());
     let id = ws.component_id(pose.instance_id as usize)?;
     let mask = ws.mask_ref(id, pose.bbox);
     let mut v = match verify_off_table(verifier, frame, ws, id, pose) {

@@ -601,3 +601,107 @@ fn a_region_spread_over_the_table_is_judged_on_its_object() {
     assert!(passed_plain * 2 <= checked, "whole regions: {passed_plain} of {checked} true poses passed");
     assert!(passed_trimmed + 1 >= passed_ungrown, "off the table: {passed_trimmed} vs {passed_ungrown} ungrown");
 }
+
+/// A solid object cannot stand inside the table. A bowl turned over with its
+/// base flush with a patch of table explains the patch as depth sees it (its
+/// base lies on the measured plane, the rest "behind" it); its wall lies up to
+/// its height below the support plane, and that term alone refuses it. True
+/// poses stand on the plane and are judged as without the term.
+#[test]
+fn a_pose_sunk_into_the_table_fails_on_the_support_plane() {
+    use fusepose_estimator::verify::verify_on_region;
+    use fusepose_estimator::workspace::DEFAULT_SUPPORT_FLOOR_M;
+
+    let set = builtin_objects();
+    let on = VerifyConfig { max_below_support: 0.05, ..VerifyConfig::default() };
+    let mut with_term = Verifier::new(&set, on);
+    let mut without = Verifier::new(&set, VerifyConfig { max_below_support: 2.0, ..on });
+    // Every other term that could refuse a pose flush with the table off.
+    let mut only_term = Verifier::new(
+        &set,
+        VerifyConfig {
+            max_plane_continuation: 1.0,
+            max_depth_continuity: 1.0,
+            max_off_plane: 1.0,
+            min_inlier_fraction: 0.0,
+            min_fit: 0.0,
+            agreeing_min_inlier_fraction: 0.0,
+            agreeing_min_fit: 0.0,
+            max_behind_fraction: 1.0,
+            min_depth_support: 0.0,
+            min_thin_mask_agreement: 0.0,
+            max_residual_m: f32::INFINITY,
+            trim_table_share: 2.0,
+            ..on
+        },
+    );
+    let config = WorkspaceConfig {
+        num_classes: set.len() as u16,
+        support_floor_m: DEFAULT_SUPPORT_FLOOR_M,
+        ..WorkspaceConfig::default()
+    };
+    let mut ws = Workspace::new(config).unwrap();
+    let mut checked = 0;
+    for seed in 0..6 {
+        let r = render(&set, 7_000 + seed);
+        let labels = r.target.labels().to_vec();
+        let frame = view(&r, &labels);
+        let n = ws.prepare(&frame, 1).unwrap();
+        assert!(ws.support_plane().is_some(), "scene {seed}: no support plane fitted");
+        for i in 0..n {
+            let inst = ws.instances[i];
+            let Some(t) = r.truth.objects.iter().find(|o| o.class_id == inst.class_id) else { continue };
+            if t.visible_fraction < 0.5 || inst.pixels < 400 {
+                continue;
+            }
+            let pose = pose_of(inst.class_id, i, &ws, &t.pose);
+            let a = verify_on_region(&mut with_term, &frame, &ws, None, &pose).unwrap();
+            let b = verify_on_region(&mut without, &frame, &ws, None, &pose).unwrap();
+            assert!(a.below_support < 0.01, "class {}: a true pose stands on the table: {a:?}", inst.class_id);
+            assert_eq!(a.passed, b.passed, "class {}: judged as without the term", inst.class_id);
+            checked += 1;
+        }
+    }
+    assert!(checked >= 12, "too few objects checked: {checked}");
+
+    let bowl = set.class_of("bowl").unwrap();
+    let model = set.by_class(bowl).unwrap();
+    let mut tried = 0;
+    for seed in 0..24 {
+        if tried >= 4 {
+            break;
+        }
+        let r = render(&set, 9_100 + seed);
+        let w = r.truth.intrinsics.width as usize;
+        let Some((u0, v0)) = table_patch(&r, 60, 40) else { continue };
+        let labels = patch_labels(&r, bowl, (u0, v0), 60, 40);
+        let frame = view(&r, &labels);
+        // The support floor leaves a patch with too few points above the table no instance.
+        if ws.prepare(&frame, 1).unwrap() != 1 {
+            continue;
+        }
+        let (uc, vc) = (u0 + 30, v0 + 20);
+        let z = r.target.depth_m()[vc * w + uc] as f64;
+        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
+        // Upside down (its base up), sunk until the base lies in the table plane.
+        let sunk = Pose::from_parts(
+            nalgebra::Translation3::new(on_table.x, on_table.y, model.bbox_min.z),
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+        );
+        let ghost = pose_of(bowl, 0, &ws, &(r.truth.camera_from_table * sunk));
+        let v = verify_on_region(&mut only_term, &frame, &ws, None, &ghost).unwrap();
+        // The bowl is 5.5 cm tall: a third of its surface lies over 3 cm down.
+        assert!(v.below_support > 0.2, "the sunk bowl lies below the table: {v:?}");
+        assert!(!v.passed, "a bowl sunk into the table passed: {v:?}");
+        let lenient = verify_on_region(&mut without, &frame, &ws, None, &ghost).unwrap();
+        assert_eq!(lenient.below_support, v.below_support, "the share is reported with the term off too");
+        let free = Verifier::new(&set, VerifyConfig { max_below_support: 2.0, ..*only_term.config() }).verify(
+            &frame,
+            mask(&ws, 0),
+            &ghost,
+        );
+        assert!(free.passed, "with the term off nothing else refuses it here: {free:?}");
+        tried += 1;
+    }
+    assert!(tried >= 3, "found a bare table patch in only {tried} scenes");
+}
