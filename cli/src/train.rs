@@ -128,6 +128,11 @@ pub struct Args {
     /// segmenter embedded in the --resume file instead of the ground truth.
     #[arg(long, default_value_t = 0.0)]
     pub seg_masks: f64,
+    /// Share (0..1) of the other frames (ground-truth masks) whose object
+    /// masks are cut to a random 30-90 % part: the pose net learns from the
+    /// partial masks a segmenter gives on unfamiliar images.
+    #[arg(long, default_value_t = 0.0)]
+    pub partial_masks: f64,
     /// Training samples per object per rendered frame: each one draws its own
     /// point subset and augmentation from the same render, so rendering costs
     /// less per sample (1..=8).
@@ -348,6 +353,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(0.0..=1.0).contains(&args.min_visible) {
         anyhow::bail!("--min-visible must be in 0..=1, got {}", args.min_visible);
     }
+    if !(0.0..=1.0).contains(&args.partial_masks) {
+        anyhow::bail!("--partial-masks must be a share in 0..=1, got {}", args.partial_masks);
+    }
     let sampler = training_sampler(&args);
     let opts = TrainOptions {
         warm_start: args.warm_start.clone(),
@@ -390,7 +398,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.randomize,
             args.depth_sensor,
             if args.single_instances { "one copy per class" } else { "several copies per class" }
-        ) + &if args.views_per_frame > 1 {
+        ) + &if args.partial_masks > 0.0 {
+            format!(", {:.0} % of ground-truth-mask frames with masks cut to a part", args.partial_masks * 100.0)
+        } else {
+            String::new()
+        } + &if args.views_per_frame > 1 {
             format!(", {} samples per object per rendered frame", args.views_per_frame)
         } else {
             String::new()
@@ -398,6 +410,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         source,
         progress: !args.quiet,
         seg_masks: args.seg_masks,
+        partial_masks: args.partial_masks,
         min_visible: args.min_visible,
         sampler,
         views_per_frame: args.views_per_frame as usize,

@@ -76,6 +76,11 @@ pub struct DataConfig {
     /// draws its own point subset and augmentation from the same render, so
     /// the render's cost is shared by `views_per_frame` samples.
     pub views_per_frame: usize,
+    /// Share (0..=1) of ground-truth-mask frames whose object masks are cut
+    /// to a random part ([`cut_masks`]): on images it did not render, the
+    /// segmenter finds only part of many objects (docs/BENCHMARKS.md,
+    /// session 40), a view the ground truth never shows the network.
+    pub partial_masks: f64,
 }
 
 impl DataConfig {
@@ -90,6 +95,42 @@ impl DataConfig {
             augment: false,
             sampler: SamplerConfig::default(),
             views_per_frame: 1,
+            partial_masks: 0.0,
+        }
+    }
+}
+
+/// Smallest object mask (pixels) [`cut_masks`] cuts.
+pub const MIN_CUT_PIXELS: usize = 200;
+
+/// Cuts each object's mask in `class_plane` to a random part: the pixels on
+/// one side of a line in a random direction, keeping 30–90 % of them (the
+/// rest become background). `instances` is the frame's instance label plane;
+/// masks under [`MIN_CUT_PIXELS`] stay whole.
+pub fn cut_masks<R: Rng>(class_plane: &mut [u16], instances: &[u16], width: usize, rng: &mut R) {
+    let mut pixels: Vec<Vec<u32>> = Vec::new();
+    for (p, &l) in instances.iter().enumerate() {
+        if l != 0 && class_plane.get(p).is_some_and(|&c| c != 0) {
+            let l = l as usize;
+            if pixels.len() <= l {
+                pixels.resize_with(l + 1, Vec::new);
+            }
+            pixels[l].push(p as u32);
+        }
+    }
+    let w = width.max(1);
+    for own in pixels.iter().filter(|o| o.len() >= MIN_CUT_PIXELS) {
+        let angle: f64 = rng.random_range(0.0..std::f64::consts::TAU);
+        let keep: f64 = rng.random_range(0.3..0.9);
+        let (c, s) = (angle.cos(), angle.sin());
+        let along = |p: u32| (p as usize % w) as f64 * c + (p as usize / w) as f64 * s;
+        let mut order: Vec<f64> = own.iter().map(|&p| along(p)).collect();
+        let k = ((order.len() as f64 * keep) as usize).min(order.len() - 1);
+        let limit = *order.select_nth_unstable_by(k, f64::total_cmp).1;
+        for &p in own {
+            if along(p) > limit {
+                class_plane[p as usize] = 0;
+            }
         }
     }
 }
@@ -203,6 +244,11 @@ pub fn frame_samples(
         }
         None => {
             target.map_labels(&truth.class_lut(), &mut class_plane);
+            // A seeded per-frame draw of its own, as the segmenter's above.
+            let mut cut = Pcg64::seed_from_u64(seed ^ 0xc07_3a5c);
+            if cut.random::<f64>() < cfg.partial_masks {
+                cut_masks(&mut class_plane, target.labels(), k.width as usize, &mut cut);
+            }
             frame.labels = Some(LabelPlane::U16(&class_plane));
         }
     }

@@ -81,6 +81,8 @@ pub struct TrainOptions {
     /// Share of rendered training frames whose masks come from the segmenter
     /// embedded in the `resume` file (0 = ground-truth masks only).
     pub seg_masks: f64,
+    /// [`DataConfig::partial_masks`].
+    pub partial_masks: f64,
     /// Objects less visible than this (share of their silhouette, 0..1) are
     /// not trained on.
     pub min_visible: f64,
@@ -226,6 +228,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         augment: true,
         sampler: opts.sampler.clone(),
         views_per_frame: opts.views_per_frame,
+        partial_masks: opts.partial_masks,
         ..DataConfig::unaugmented(cfg.num_points, cfg.crop_size)
     };
     // Training scenes: a per-seed, per-resume range far from the validation seeds.
