@@ -349,10 +349,14 @@ pub struct Args {
     /// `estimator.verify_trim_table_share` (above 1 = off).
     #[arg(long)]
     pub verify_trim_table_share: Option<f32>,
-    /// Poses with more than this share of their surface samples 3 cm or more
-    /// below the support plane fail (above 1 = off).
+    /// Poses with more than this share of their surface samples 3 cm (see
+    /// the next flag) or more below the support plane fail (above 1 = off).
     #[arg(long)]
     pub verify_max_below_support: Option<f32>,
+    /// Metres below the support plane from which a surface sample counts as
+    /// sunk, as `VerifyConfig::below_support_m` (default 0.03).
+    #[arg(long)]
+    pub verify_below_support_depth: Option<f32>,
     /// `--masks net`: poses whose region the segmenter nowhere gave their
     /// class a probability of at least this fail (0 = off).
     #[arg(long)]
@@ -799,6 +803,7 @@ impl Runner {
                         min_region_probability: min_region.max(region_floor),
                         trim_table_share: args.verify_trim_table_share.unwrap_or(d.trim_table_share),
                         max_below_support: args.verify_max_below_support.unwrap_or(d.max_below_support),
+                        below_support_m: args.verify_below_support_depth.unwrap_or(d.below_support_m),
                         ..d
                     },
                 )
