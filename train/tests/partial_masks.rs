@@ -32,7 +32,7 @@ fn a_cut_keeps_one_side_of_a_line_through_each_large_mask() {
             classes[v * w + u] = 5;
         }
     }
-    assert!(100 < MIN_CUT_PIXELS && 1200 >= MIN_CUT_PIXELS);
+    const { assert!(100 < MIN_CUT_PIXELS && 1200 >= MIN_CUT_PIXELS) };
     let mut kept_shares = Vec::new();
     for seed in 0..20 {
         let mut cut = classes.clone();
