@@ -143,6 +143,12 @@ fn back_project(r: &Rendered, u: usize, v: usize, z: f64) -> nalgebra::Point3<f6
 }
 
 /// A class-`class` label plane with one `pw`x`ph` rectangle at (u0, v0).
+/// Pixel (u, v)'s measured point in the table's frame (z = height above it).
+fn table_point(r: &Rendered, u: usize, v: usize) -> nalgebra::Point3<f64> {
+    let z = r.target.depth_m()[v * r.truth.intrinsics.width as usize + u] as f64;
+    r.truth.camera_from_table.inverse() * back_project(r, u, v, z)
+}
+
 fn patch_labels(r: &Rendered, class: u16, (u0, v0): (usize, usize), pw: usize, ph: usize) -> Vec<u16> {
     let w = r.truth.intrinsics.width as usize;
     let mut labels = vec![0u16; w * r.truth.intrinsics.height as usize];
@@ -164,15 +170,13 @@ fn a_bowl_made_up_for_a_patch_of_table_fails() {
             break;
         }
         let r = render(&set, 9_100 + seed);
-        let w = r.truth.intrinsics.width as usize;
         let Some((u0, v0)) = table_patch(&r, 60, 40) else { continue };
         let labels = patch_labels(&r, bowl, (u0, v0), 60, 40);
         let frame = view(&r, &labels);
         assert_eq!(ws.prepare(&frame, 1).unwrap(), 1);
         // The most plausible ghost: an upright bowl standing on the patch's centre point.
         let (uc, vc) = (u0 + 30, v0 + 20);
-        let z = r.target.depth_m()[vc * w + uc] as f64;
-        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
+        let on_table = table_point(&r, uc, vc);
         let model = set.by_class(bowl).unwrap();
         let table_pose = Pose::from_parts(
             nalgebra::Translation3::new(on_table.x, on_table.y, -model.bbox_min.z),
@@ -204,14 +208,12 @@ fn a_box_face_flush_with_a_table_patch_fails_on_its_border() {
             break;
         }
         let r = render(&set, 9_300 + seed);
-        let w = r.truth.intrinsics.width as usize;
         let Some((u0, v0)) = table_patch(&r, 50, 50) else { continue };
         let labels = patch_labels(&r, block, (u0, v0), 50, 50);
         let frame = view(&r, &labels);
         assert_eq!(ws.prepare(&frame, 1).unwrap(), 1);
         let (uc, vc) = (u0 + 25, v0 + 25);
-        let z = r.target.depth_m()[vc * w + uc] as f64;
-        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
+        let on_table = table_point(&r, uc, vc);
         // Upright, sunk by its height: its top face lies in the table plane.
         let sunk = Pose::from_parts(
             nalgebra::Translation3::new(on_table.x, on_table.y, -model.bbox_max.z),
@@ -256,8 +258,7 @@ fn a_pose_over_missing_depth_fails() {
         let w = r.truth.intrinsics.width as usize;
         let Some((u0, v0)) = table_patch(&r, 60, 60) else { continue };
         let (uc, vc) = (u0 + 30, v0 + 50);
-        let z = r.target.depth_m()[vc * w + uc] as f64;
-        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
+        let on_table = table_point(&r, uc, vc);
         let model = set.by_class(can).unwrap();
         let standing = Pose::from_parts(
             nalgebra::Translation3::new(on_table.x, on_table.y, -model.bbox_min.z),
@@ -672,7 +673,6 @@ fn a_pose_sunk_into_the_table_fails_on_the_support_plane() {
             break;
         }
         let r = render(&set, 9_100 + seed);
-        let w = r.truth.intrinsics.width as usize;
         let Some((u0, v0)) = table_patch(&r, 60, 40) else { continue };
         let labels = patch_labels(&r, bowl, (u0, v0), 60, 40);
         let frame = view(&r, &labels);
@@ -681,8 +681,7 @@ fn a_pose_sunk_into_the_table_fails_on_the_support_plane() {
             continue;
         }
         let (uc, vc) = (u0 + 30, v0 + 20);
-        let z = r.target.depth_m()[vc * w + uc] as f64;
-        let on_table = r.truth.camera_from_table.inverse() * back_project(&r, uc, vc, z);
+        let on_table = table_point(&r, uc, vc);
         // Upside down (its base up), sunk until the base lies in the table plane.
         let sunk = Pose::from_parts(
             nalgebra::Translation3::new(on_table.x, on_table.y, model.bbox_min.z),
