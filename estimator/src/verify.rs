@@ -140,6 +140,8 @@ pub struct VerifyConfig {
     /// table and the rest "behind" the measured surface, where depth cannot
     /// refuse it. Above 1 = off.
     pub max_below_support: f32,
+    /// Metres below the plane from which a sample counts as sunk: beyond the
+    /// plane's fit and the depth noise of a real object resting on it.
     pub below_support_m: f32,
 }
 
@@ -204,7 +206,8 @@ pub struct Verification {
     /// The segmenter's peak probability of the pose's class in its region
     /// ([`Verification::judge_region_probability`]); NaN when not judged.
     pub region_probability: f32,
-    /// Share of the model's surface samples below the support plane
+    /// Share of the model's surface samples more than
+    /// [`VerifyConfig::below_support_m`] below the support plane
     /// ([`VerifyConfig::max_below_support`]); 0 without a plane.
     pub below_support: f32,
     /// Samples judged (inliers + outliers).
@@ -313,12 +316,11 @@ impl Verifier {
         let Some(samples) = (pose.class_id as usize).checked_sub(1).and_then(|i| self.samples.get(i)) else {
             return f32::NAN;
         };
+        // The plane in the object's frame: height = n · (R s + t) + d = (Rᵀ n) · s + (n · t + d).
         let m = pose.rotation.to_rotation_matrix().matrix().map(|v| v as f32);
-        let t = pose.translation.map(|v| v as f32);
-        let below = samples
-            .iter()
-            .filter(|s| plane.height(&(m * nalgebra::Vector3::new(s[0], s[1], s[2]) + t)) < -depth_m)
-            .count();
+        let n = m.transpose() * plane.normal;
+        let d = plane.height(&pose.translation.map(|v| v as f32));
+        let below = samples.iter().filter(|s| n[0] * s[0] + n[1] * s[1] + n[2] * s[2] + d < -depth_m).count();
         below as f32 / samples.len().max(1) as f32
     }
 

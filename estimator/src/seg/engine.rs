@@ -519,9 +519,8 @@ impl SegEngine {
             return Err(SegError::PartnerWeight(weight));
         }
         let (a, b) = (&self.config, &partner.config);
-        if (a.input_width, a.input_height, a.outputs()) != (b.input_width, b.input_height, b.outputs())
-            || partner.logits.len() != self.logits.len()
-        {
+        // Same input size and outputs: the same logits layout.
+        if (a.input_width, a.input_height, a.outputs()) != (b.input_width, b.input_height, b.outputs()) {
             return Err(SegError::PartnerMismatch {
                 input: (a.input_width, a.input_height),
                 outputs: a.outputs(),
