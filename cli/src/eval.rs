@@ -258,8 +258,10 @@ pub struct Args {
     pub recut_separation: f32,
     /// `--recut`: where a region's cut comes from: `points` (k-means on its
     /// 3D points), `votes` (the segmenter's centre-offset votes where its
-    /// file has the head and they point at two centres, else the points) or
-    /// `votes-only`, as the daemon's `estimator.recut_proposal`.
+    /// file has the head and they point at two centres, else the points),
+    /// `votes-only`, or `contacts` (the segmenter's contact band where its
+    /// file has the branch and the band parts the region, else the points),
+    /// as the daemon's `estimator.recut_proposal`.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.proposal)]
     pub recut_proposal: fusepose_estimator::recut::CutProposal,
     /// `--recut`: most pieces a region is cut into (2 to 6): a region whose
@@ -1255,10 +1257,11 @@ impl Runner {
             );
         }
         if self.recut.is_some() {
-            let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, refused, .. } = self.recut_stats;
+            let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, by_contacts, refused, .. } =
+                self.recut_stats;
             let [unverified, close, explained, overlap] = refused;
             println!(
-                "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes), {kept} kept (as two or more copies); \
+                "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes, {by_contacts} along contacts), {kept} kept (as two or more copies); \
                  refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap"
             );
         }

@@ -172,6 +172,11 @@ pub struct Args {
     /// every class output, stays exactly as it was. Needs `--resume`.
     #[arg(long)]
     pub seg_freeze_trunk: bool,
+    /// `--stage seg`: train the contact branch, which marks where two object
+    /// instances touch (the second look's `contacts` cut proposal); a resumed
+    /// file without it gets one. With `--seg-freeze-trunk` it learns alone.
+    #[arg(long)]
+    pub seg_contacts: bool,
     /// `--stage seg`: threads rendering training frames (default: one per
     /// core; the frames, and so the trained weights, are the same for any count).
     #[arg(long, value_parser = clap::value_parser!(u16).range(1..=64))]

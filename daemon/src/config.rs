@@ -282,7 +282,8 @@ pub struct EstimatorConfig {
     pub recut: f32,
     /// `recut`: where the cut comes from: `votes` (the segmenter's
     /// centre-offset votes where its file has the head and they point at two
-    /// centres, else the region's 3D points), `votes-only` or `points`
+    /// centres, else the region's 3D points), `votes-only`, `contacts` (the
+    /// segmenter's contact band where its file has the branch) or `points`
     /// (`fusepose_estimator::recut::CutProposal`).
     pub recut_proposal: String,
     /// `recut`: most pieces a region is cut into (2 to 6): one whose pose
@@ -704,7 +705,7 @@ impl DaemonConfig {
             return Err(invalid(
                 "estimator.recut_proposal",
                 &e.recut_proposal,
-                "must be \"votes\", \"votes-only\" or \"points\"",
+                "must be \"votes\", \"votes-only\", \"contacts\" or \"points\"",
             ));
         }
         if !(0.0..=1.0).contains(&e.confirm_within_m) {

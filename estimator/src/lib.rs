@@ -10,6 +10,7 @@
 //! models and intrinsics; never on the daemon, client or trainer.
 
 pub mod alternates;
+pub mod contact_cut;
 pub mod cpu_pin;
 pub mod duplicates;
 pub mod explained;

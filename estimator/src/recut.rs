@@ -47,6 +47,7 @@
 
 use fusepose_scene::ObjectSet;
 
+use crate::contact_cut::{ContactCut, ContactMap};
 use crate::frame::{FrameView, LabelPlane};
 use crate::poses::{ObjectPose, PoseSet};
 use crate::seg::SegEngine;
@@ -87,6 +88,9 @@ const MIN_PIECE_SHARE: f32 = 0.2;
 /// cells; the votes of one object scatter by a cell or two, and copies that
 /// touch have centres a body width apart, several cells at working range).
 const MIN_VOTE_GAP_CELLS: f32 = 3.0;
+/// A sample seeds its k-means piece's flood along the contacts when it lies
+/// at most this share of the distance to any other centre from its own.
+const SEED_RATIO: f32 = 0.6;
 
 /// Where each pixel's object centre lies: a segmenter's centre-offset votes
 /// ([`SegEngine::vote_at`]). The pixels of one object vote for one point,
@@ -113,6 +117,9 @@ pub enum CutProposal {
     Votes,
     /// The votes only: a region whose votes point at one centre is not cut.
     VotesOnly,
+    /// The segmenter's contact band where its file has the contact branch
+    /// and the band parts the region ([`crate::contact_cut`]); else the 3D points.
+    Contacts,
 }
 
 impl std::fmt::Display for CutProposal {
@@ -121,11 +128,12 @@ impl std::fmt::Display for CutProposal {
             Self::Points => "points",
             Self::Votes => "votes",
             Self::VotesOnly => "votes-only",
+            Self::Contacts => "contacts",
         })
     }
 }
 
-/// `points`, `votes` or `votes-only`.
+/// `points`, `votes`, `votes-only` or `contacts`.
 impl std::str::FromStr for CutProposal {
     type Err = String;
 
@@ -134,7 +142,8 @@ impl std::str::FromStr for CutProposal {
             "points" => Ok(Self::Points),
             "votes" => Ok(Self::Votes),
             "votes-only" => Ok(Self::VotesOnly),
-            _ => Err(format!("cut proposal {s:?}: expected points, votes or votes-only")),
+            "contacts" => Ok(Self::Contacts),
+            _ => Err(format!("cut proposal {s:?}: expected points, votes, votes-only or contacts")),
         }
     }
 }
@@ -292,6 +301,8 @@ pub struct RecutStats {
     pub estimates: usize,
     /// Of the regions cut, those cut along the segmenter's centre votes.
     pub by_votes: usize,
+    /// Of the regions cut, those cut along the segmenter's contact band.
+    pub by_contacts: usize,
     /// Cuts estimated and refused, by the first term that refused them:
     /// a piece without a pose or whose pose failed verification, poses too
     /// close, one pose explaining the other's piece, solids overlapping.
@@ -307,6 +318,7 @@ impl std::ops::AddAssign for RecutStats {
         self.deferred += o.deferred;
         self.estimates += o.estimates;
         self.by_votes += o.by_votes;
+        self.by_contacts += o.by_contacts;
         for (r, n) in self.refused.iter_mut().zip(o.refused) {
             *r += n;
         }
@@ -359,6 +371,9 @@ pub struct Recut {
     sample_votes: Vec<[f32; 3]>,
     /// [`Recut::set_votes`].
     votes: Option<Box<dyn CentreVotes + Send>>,
+    /// [`Recut::set_contacts`].
+    contacts: Option<Box<dyn ContactMap + Send>>,
+    contact_cut: ContactCut,
     cluster: Vec<u8>,
     order: Vec<(f32, u8)>,
     /// Per candidate: its pieces' centres (k-means), camera frame.
@@ -411,6 +426,8 @@ impl Recut {
             sample_pixels: Vec::with_capacity(SAMPLES),
             sample_votes: Vec::with_capacity(SAMPLES),
             votes: None,
+            contacts: None,
+            contact_cut: ContactCut::default(),
             cluster: vec![0; SAMPLES],
             order: Vec::with_capacity(SAMPLES),
             centres: Vec::with_capacity(regions),
@@ -449,6 +466,12 @@ impl Recut {
     /// (tests, or a producer's own votes); they replace the segmenter's.
     pub fn set_votes(&mut self, votes: Box<dyn CentreVotes + Send>) {
         self.votes = Some(votes);
+    }
+
+    /// Contacts for the cuts from a source other than the segmenter (tests,
+    /// or a producer's own); they replace the segmenter's.
+    pub fn set_contacts(&mut self, contacts: Box<dyn ContactMap + Send>) {
+        self.contacts = Some(contacts);
     }
 
     /// In the next [`Recut::run`] only: estimate at most `estimates` pieces
@@ -510,16 +533,26 @@ impl Recut {
         // Votes set from elsewhere, else the segmenter's where its file has the
         // head (computed now: a file with the offset branch leaves them to here).
         let own = self.votes.take();
-        if let Some(seg) =
-            segmenter.as_deref_mut().filter(|_| own.is_none() && self.config.proposal != CutProposal::Points)
-        {
-            seg.compute_votes();
+        let own_contacts = self.contacts.take();
+        let by_contacts = self.config.proposal == CutProposal::Contacts;
+        if let Some(seg) = segmenter.as_deref_mut() {
+            if by_contacts && own_contacts.is_none() {
+                seg.compute_contacts();
+            } else if !by_contacts && own.is_none() && self.config.proposal != CutProposal::Points {
+                seg.compute_votes();
+            }
         }
         let segmenter = segmenter.as_deref();
         let from_segmenter = segmenter.filter(|s| !s.offsets().is_empty()).map(|s| s as &dyn CentreVotes);
-        let votes = own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter);
-        stats.by_votes = self.cut(frame, ws, poses.as_slice(), votes);
+        let votes = own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter).filter(|_| !by_contacts);
+        let contacts = own_contacts
+            .as_deref()
+            .map(|c| c as &dyn ContactMap)
+            .or(segmenter.filter(|s| s.has_contacts()).map(|s| s as &dyn ContactMap))
+            .filter(|_| by_contacts);
+        (stats.by_votes, stats.by_contacts) = self.cut(frame, ws, poses.as_slice(), votes, contacts);
         self.votes = own;
+        self.contacts = own_contacts;
         let budget = self.frame_budget.take();
         let rounds = if self.config.refit { REFIT_ROUNDS } else { 0 };
         let first = self.candidates.first().map_or(0, |c| c.pieces as usize * (1 + rounds));
@@ -680,6 +713,9 @@ impl Recut {
         let (w, h) = (frame.width(), frame.height());
         self.ids.clear();
         self.ids.resize(w * h, 0);
+        if self.config.proposal == CutProposal::Contacts {
+            self.contact_cut.resize(w, h);
+        }
         self.written.clear();
         self.classes.fill(0);
         let side = (w.min(h) / 8).max(1);
@@ -877,14 +913,17 @@ impl Recut {
     /// in 3D (every pixel to its nearest centre, by image distance to the
     /// projected centres where it has no depth). Pieces must be even enough
     /// ([`MIN_PIECE_SHARE`]); a candidate no count cuts evenly is dropped.
-    /// Returns how many were cut along votes.
+    /// With `contacts`, a region the contact band parts into two or more
+    /// even pieces is cut along it instead ([`ContactCut`]).
+    /// Returns how many were cut along votes, and along contacts.
     fn cut(
         &mut self,
         frame: &FrameView<'_>,
         ws: &Workspace,
         poses: &[ObjectPose],
         votes: Option<&dyn CentreVotes>,
-    ) -> usize {
+        contacts: Option<&dyn ContactMap>,
+    ) -> (usize, usize) {
         let voter = votes.filter(|_| self.config.proposal != CutProposal::Points);
         let max_pieces = self.config.pieces();
         let (w, h) = (frame.width(), frame.height());
@@ -897,7 +936,10 @@ impl Recut {
         self.classes.fill(0);
         self.centres.clear();
         let all = ws.component_ids();
-        let (mut kept, mut by_votes, mut base) = (0, 0, 0u16);
+        let (mut kept, mut by_votes, mut by_contacts, mut base) = (0, 0, 0, 0u16);
+        if contacts.is_some() {
+            self.contact_cut.resize(w, h);
+        }
         for c in 0..self.candidates.len() {
             let pose = poses[self.candidates[c].pose];
             let Some(id) = ws.component_id(pose.instance_id as usize) else { continue };
@@ -957,6 +999,14 @@ impl Recut {
                     })
                 })
             });
+            // The contact band's pieces, when it parts the region evenly.
+            let contact_pieces = contacts.and_then(|map| {
+                let k = self.contact_cut.cut([u0, v0, u1, v1], in_region, map, most)?;
+                for (m, &[u, v]) in self.cluster.iter_mut().zip(&self.sample_pixels) {
+                    *m = self.contact_cut.piece_at(v as usize * w + u as usize) as u8;
+                }
+                even(&self.cluster[..n], k).then_some(k)
+            });
             let ids = &mut self.ids;
             let mut fill = |piece_of: &dyn Fn(usize, usize, usize) -> usize| {
                 for v in v0..=v1 {
@@ -969,18 +1019,27 @@ impl Recut {
                 }
             };
             let mut centres = [[0.0f32; 3]; MAX_CUT_PIECES];
-            let pieces = if let Some((seg, cells, k)) = vote_cut {
-                fill(&|u, v, _| seg.vote_at(u, v).map_or(0, |vote| nearest_2d(&cells[..k], vote)));
-                by_votes += 1;
-                // The pieces' 3D centres (for the cut carried to the next frame).
+            let piece_centres = |cluster: &[u8], k: usize, centres: &mut [[f32; 3]; MAX_CUT_PIECES]| {
                 let mut sums = [[0.0f32; 4]; MAX_CUT_PIECES];
-                for (p, &m) in self.samples.iter().zip(&self.cluster[..n]) {
+                for (p, &m) in self.samples.iter().zip(cluster) {
                     let s = &mut sums[(m as usize).min(k - 1)];
                     *s = [s[0] + p[0], s[1] + p[1], s[2] + p[2], s[3] + 1.0];
                 }
                 for (centre, s) in centres.iter_mut().zip(&sums).take(k) {
                     *centre = [s[0], s[1], s[2]].map(|x| x / s[3].max(1.0));
                 }
+            };
+            let pieces = if let Some(k) = contact_pieces {
+                let cut = &self.contact_cut;
+                fill(&|_, _, p| cut.piece_at(p));
+                by_contacts += 1;
+                piece_centres(&self.cluster[..n], k, &mut centres);
+                k
+            } else if let Some((seg, cells, k)) = vote_cut {
+                fill(&|u, v, _| seg.vote_at(u, v).map_or(0, |vote| nearest_2d(&cells[..k], vote)));
+                by_votes += 1;
+                // The pieces' 3D centres (for the cut carried to the next frame).
+                piece_centres(&self.cluster[..n], k, &mut centres);
                 k
             } else {
                 if voter.is_some() && self.config.proposal == CutProposal::VotesOnly {
@@ -997,7 +1056,35 @@ impl Recut {
                 for (pixel, centre) in pixels.iter_mut().zip(&centres).take(k) {
                     *pixel = project(frame, Some(centre));
                 }
-                fill(&|_, _, p| nearest_piece(frame, &centres[..k], &pixels[..k], p));
+                // With contacts, the samples near their centre seed a flood
+                // that meets where the copies touch, not halfway between centres.
+                let grown = contacts.is_some_and(|map| {
+                    let near = |i: usize| {
+                        let s = self.samples[i];
+                        let d = |c: &[f32; 3]| (0..3).map(|j| (s[j] - c[j]).powi(2)).sum::<f32>();
+                        let own = d(&centres[self.cluster[i] as usize]);
+                        (0..k)
+                            .filter(|&m| m != self.cluster[i] as usize)
+                            .all(|m| own < SEED_RATIO * SEED_RATIO * d(&centres[m]))
+                    };
+                    let seeds = (0..n).filter(|&i| near(i)).map(|i| {
+                        let [u, v] = self.sample_pixels[i];
+                        (v as usize * w + u as usize, self.cluster[i] as u16)
+                    });
+                    self.contact_cut.grow([u0, v0, u1, v1], in_region, map, seeds);
+                    let mut moved = [0u8; SAMPLES];
+                    for (m, &[u, v]) in moved.iter_mut().zip(&self.sample_pixels) {
+                        *m = self.contact_cut.piece_at(v as usize * w + u as usize) as u8;
+                    }
+                    even(&moved[..n], k)
+                });
+                if grown {
+                    let cut = &self.contact_cut;
+                    fill(&|_, _, p| cut.piece_at(p));
+                    by_contacts += 1;
+                } else {
+                    fill(&|_, _, p| nearest_piece(frame, &centres[..k], &pixels[..k], p));
+                }
                 k
             };
             self.classes[base as usize + 1..=base as usize + pieces].fill(pose.class_id);
@@ -1008,7 +1095,7 @@ impl Recut {
             kept += 1;
         }
         self.candidates.truncate(kept);
-        by_votes
+        (by_votes, by_contacts)
     }
 
     /// Verifies each piece's pose on its piece's mask.

@@ -196,13 +196,29 @@ fn instance_planes_do_not_allocate_after_warm_up() {
 #[test]
 fn the_second_look_does_not_allocate_after_warm_up() {
     use fusepose_estimator::recut::{RecutConfig, RecutPoses};
-    second_look_without_allocations(RecutConfig::DEFAULT, false);
+    second_look_without_allocations(RecutConfig::DEFAULT, false, false);
     // Cuts into three, the regions of failed poses looked at too, cuts refitted to the pieces' poses.
     let heaps = RecutConfig { max_pieces: 4, poses: RecutPoses::Any, refit: true, ..RecutConfig::DEFAULT };
-    second_look_without_allocations(heaps, true);
+    second_look_without_allocations(heaps, true, false);
+    // Cut along a contact map (pieces grown over it from their centres).
+    let contacts = RecutConfig { proposal: fusepose_estimator::recut::CutProposal::Contacts, ..RecutConfig::DEFAULT };
+    second_look_without_allocations(contacts, false, true);
 }
 
-fn second_look_without_allocations(recut_config: fusepose_estimator::recut::RecutConfig, rows_of_three: bool) {
+/// A contact map that sees no contact anywhere.
+struct NoContact;
+
+impl fusepose_estimator::contact_cut::ContactMap for NoContact {
+    fn contact_at(&self, _: usize, _: usize) -> Option<f32> {
+        Some(0.05)
+    }
+}
+
+fn second_look_without_allocations(
+    recut_config: fusepose_estimator::recut::RecutConfig,
+    rows_of_three: bool,
+    contacts: bool,
+) {
     use fusepose_estimator::interpenetration::Solids;
     use fusepose_estimator::recut::Recut;
     use fusepose_estimator::verify::{Verifier, VerifyConfig, verify_on_region};
@@ -216,6 +232,9 @@ fn second_look_without_allocations(recut_config: fusepose_estimator::recut::Recu
     let mut verifier = Verifier::new(&objects, VerifyConfig::default());
     let solids = std::sync::Arc::new(Solids::new(&objects));
     let mut recut = Recut::new(&objects, solids, config, recut_config).unwrap();
+    if contacts {
+        recut.set_contacts(Box::new(NoContact));
+    }
     let mut poses = PoseSet::with_capacity(2 * config.max_instances);
     let mut verdicts = Vec::with_capacity(2 * config.max_instances);
     let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| {

@@ -10,6 +10,7 @@ mod common;
 use std::sync::Arc;
 
 use common::{BoxObject, SyntheticFrame, l_block, object_set, painted, render};
+use fusepose_estimator::contact_cut::ContactMap;
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutPoses, RecutStats, pieces_for};
@@ -58,6 +59,21 @@ fn second_look_voted(
     votes: Option<Votes>,
     segmenter: Option<&mut SegEngine>,
 ) -> Outcome {
+    second_look_set(view, config, estimator, segmenter, |recut| {
+        if let Some(votes) = votes {
+            recut.set_votes(Box::new(votes));
+        }
+    })
+}
+
+/// As [`second_look_voted`], with `setup` given the second look before it runs.
+fn second_look_set(
+    view: &FrameView<'_>,
+    config: RecutConfig,
+    estimator: &mut dyn Estimator,
+    segmenter: Option<&mut SegEngine>,
+    setup: impl FnOnce(&mut Recut),
+) -> Outcome {
     let objects = object_set(&[l_block()]);
     let ws_config = WorkspaceConfig { num_classes: 1, ..Default::default() };
     let mut ws = Workspace::new(ws_config).unwrap();
@@ -75,9 +91,7 @@ fn second_look_voted(
         .collect();
     let before = poses.len();
     let mut recut = Recut::new(&objects, Arc::new(Solids::new(&objects)), ws_config, config).unwrap();
-    if let Some(votes) = votes {
-        recut.set_votes(Box::new(votes));
-    }
+    setup(&mut recut);
     let stats = recut.run(view, &mut ws, &mut poses, &mut verdicts, estimator, &mut verifier, segmenter, 7).unwrap();
     Outcome { poses, verdicts, stats, ws, before }
 }
@@ -148,6 +162,49 @@ fn votes_for_two_centres_cut_the_region_along_them() {
     assert_eq!((boxes[0][2], boxes[1][0]), (cx - 1, cx), "piece boxes {boxes:?}");
 }
 
+/// A contact band as a segmenter's contact branch would give it: probability
+/// 0.9 on the frame columns within the band, 0.05 elsewhere.
+struct Band(std::ops::RangeInclusive<usize>);
+
+impl ContactMap for Band {
+    fn contact_at(&self, u: usize, _: usize) -> Option<f32> {
+        Some(if self.0.contains(&u) { 0.9 } else { 0.05 })
+    }
+}
+
+#[test]
+fn a_contact_band_between_two_copies_cuts_the_region_along_it() {
+    let l = l_block();
+    let frame = pair(&l);
+    let cx = common::intrinsics().cx as usize;
+    let objects = object_set(&[l_block()]);
+    let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+    // The band's own cut (refit would move it to the pieces' poses).
+    let config = RecutConfig { proposal: CutProposal::Contacts, refit: false, ..RecutConfig::DEFAULT };
+    let band = Band(cx - 4..=cx + 3);
+    let out = second_look_set(&frame.view(), config, &mut icp, None, |r| r.set_contacts(Box::new(band)));
+    assert_eq!((out.before, out.stats.tried, out.stats.by_contacts, out.stats.by_votes), (1, 1, 1, 0));
+    assert_eq!(out.stats.kept, 1, "the cut stands");
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    for (x, truth) in xs.iter().zip([-0.04, 0.04]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
+    // The band is shared (each band pixel joins the nearer part within the
+    // region): the pieces meet within a few pixels of the blocks' contact.
+    let mut boxes: Vec<[u16; 4]> = out.ws.instances.iter().map(|i| i.bbox).collect();
+    boxes.sort();
+    let (left_end, right_start) = (boxes[0][2] as usize, boxes[1][0] as usize);
+    assert!(left_end.abs_diff(cx) <= 3 && right_start.abs_diff(cx) <= 3, "piece boxes {boxes:?}");
+
+    // A band off the region does not part it: k-means on the 3D points
+    // cuts it, and the pieces grow from their centres over the contacts.
+    let off = Band(0..=3);
+    let config = RecutConfig { proposal: CutProposal::Contacts, ..RecutConfig::DEFAULT };
+    let out = second_look_set(&frame.view(), config, &mut icp, None, |r| r.set_contacts(Box::new(off)));
+    assert_eq!((out.stats.tried, out.stats.by_contacts, out.stats.kept), (1, 1, 1), "cut by points, grown");
+}
+
 #[test]
 fn votes_for_one_centre_leave_the_region_whole_or_fall_back_to_the_points() {
     // One block whose pose is looked at again (coverage forced), every pixel
@@ -199,8 +256,12 @@ fn cut_proposals_parse_and_a_bad_one_names_the_choices() {
     assert_eq!("votes".parse::<CutProposal>(), Ok(CutProposal::Votes));
     assert_eq!("votes-only".parse::<CutProposal>(), Ok(CutProposal::VotesOnly));
     assert_eq!("points".parse::<CutProposal>(), Ok(CutProposal::Points));
+    assert_eq!("contacts".parse::<CutProposal>(), Ok(CutProposal::Contacts));
+    for p in [CutProposal::Votes, CutProposal::VotesOnly, CutProposal::Points, CutProposal::Contacts] {
+        assert_eq!(p.to_string().parse::<CutProposal>(), Ok(p), "round trip");
+    }
     let err = "vote".parse::<CutProposal>().unwrap_err();
-    assert!(err.contains("points, votes or votes-only"), "{err}");
+    assert!(err.contains("points, votes, votes-only or contacts"), "{err}");
 }
 
 #[test]

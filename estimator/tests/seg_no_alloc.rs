@@ -220,6 +220,30 @@ fn the_offset_branch_runs_on_demand_without_allocating() {
     assert_eq!(engine.offsets(), &first[..]);
 }
 
+/// The contact branch runs only when asked, each frame's own, and computing
+/// it allocates nothing.
+#[test]
+fn the_contact_branch_runs_on_demand_without_allocating() {
+    let set = object_set(&[l_block(), step_block()]);
+    let cfg = SegConfig { offsets: false, contacts: true, ..SegConfig::new(set.len()) };
+    let file = SegFile::from_bytes(&weight_bytes(&cfg, &set)).unwrap();
+    let mut engine = SegEngine::new(&file).unwrap();
+    let (c0, d0) = frame_planes(0);
+    let (c1, d1) = frame_planes(40);
+    let mut labels = vec![0u16; 640 * 480];
+    engine.segment(&view(&c0, &d0), &mut labels).unwrap();
+    assert!(engine.has_contacts());
+    assert!(engine.contacts().is_empty() && engine.contact_at(300, 200).is_none(), "not computed unasked");
+    assert_eq!(allocations_in(|| engine.compute_contacts()), 0);
+    let first = engine.contacts().to_vec();
+    assert_eq!(first.len(), 60 * 80);
+    assert!(engine.contact_at(300, 200).is_some_and(|p| (0.0..=1.0).contains(&p)));
+    engine.segment(&view(&c1, &d1), &mut labels).unwrap();
+    assert!(engine.contacts().is_empty(), "a new frame's contacts are not the last frame's");
+    engine.compute_contacts();
+    assert_ne!(engine.contacts(), &first[..], "the new frame's contacts");
+}
+
 #[test]
 fn flip_averaged_logits_are_the_mean_of_the_frame_and_its_mirror_and_do_not_allocate() {
     let set = object_set(&[l_block(), step_block()]);

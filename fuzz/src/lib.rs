@@ -857,6 +857,7 @@ pub fn seed_seg_config(classes: usize) -> fusepose_estimator::seg::SegConfig {
         dec: [1, 1, 1],
         offsets: false,
         offset_branch: false,
+        contacts: false,
     }
 }
 

@@ -401,3 +401,95 @@ fn offset_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
     let branch = after.tensor("o1.weight").unwrap();
     assert_ne!(branch, before.tensor("d1.weight").unwrap(), "the branch learned nothing");
 }
+
+/// The contact branch (`b1` over d1's input, then the 1x1 contact head): the
+/// engine's contact logits (computed on demand) match burn's, and its
+/// probability at a pixel is the sigmoid of its cell's logit; a branch added
+/// to a trained file starts as a copy of `d1` with the head sure of no
+/// contact; training it with the trunk frozen changes only the branch and
+/// the head.
+#[test]
+fn contact_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
+    use fusepose_train::seg::{SegTrainConfig, train_segmenter};
+    let set = three_objects();
+    let dir = Scratch::new("contacts");
+    let cfg = SegConfig { offsets: false, contacts: true, ..SegConfig::new(3) };
+    let path = dir.path().join("contacts.safetensors");
+    let mut net = SegNet::new(&cfg, &Device::flex());
+    net.contact = Some(burn::nn::conv::Conv2dConfig::new([cfg.dec[2], 1], [1, 1]).init(&Device::flex()));
+    store::save(&net, &cfg, &object_entries(&set), &TrainRecord::default(), &serde_json::json!({}), &path).unwrap();
+    let mut engine = SegEngine::load(&path, &set).unwrap();
+    assert!(engine.has_contacts());
+    let input = random_input(&cfg, 12);
+    let logits = engine.forward(&input).unwrap().to_vec();
+    let x = Tensor::<4>::from_data(TensorData::new(input, [1, 4, cfg.input_height, cfg.input_width]), &Device::flex());
+    let out = net.forward_outputs(x);
+    assert_close(&logits, &out.logits.into_data().try_to_vec::<f32>().unwrap());
+    assert!(engine.contacts().is_empty(), "computed on demand only");
+    engine.compute_contacts();
+    assert_close(engine.contacts(), &out.contacts.unwrap().into_data().try_to_vec::<f32>().unwrap());
+
+    // Through a segmentation: each pixel reads its cell's probability.
+    let k = Intrinsics { fx: 300.0, fy: 300.0, cx: 159.5, cy: 119.5, width: 320, height: 240 };
+    let color: Vec<u8> = (0..320 * 240 * 3).map(|i| (i * 31 % 251) as u8).collect();
+    let depth = vec![0.6f32; 320 * 240];
+    let frame = FrameView {
+        intrinsics: k,
+        color_format: ColorFormat::Rgb8,
+        color: &color,
+        depth: DepthPlane::F32(&depth),
+        labels: None,
+    };
+    let mut labels = vec![0u16; 320 * 240];
+    engine.segment(&frame, &mut labels).unwrap();
+    assert_eq!(engine.contact_at(100, 50), None, "not yet computed for this frame");
+    engine.compute_contacts();
+    let (_, w1) = cfg.output_size();
+    // 320x240 onto the 80x60 grid: 4 pixels per cell.
+    let logit = engine.contacts()[(50 / 4) * w1 + 100 / 4];
+    let p = engine.contact_at(100, 50).unwrap();
+    assert!((p - 1.0 / (1.0 + (-logit).exp())).abs() < 1e-6, "{p} vs logit {logit}");
+    assert_eq!(engine.contact_at(320, 0), None, "off the frame");
+
+    // A trained file without the branch: b1 starts as d1, the head at 5 %.
+    let plain = SegConfig { offsets: false, ..SegConfig::new(3) };
+    let plain_path = dir.path().join("plain.safetensors");
+    save_random(&plain, &set, &plain_path);
+    let loaded = store::load(&plain_path, &Device::flex()).unwrap();
+    let d1 = loaded.net.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
+    let with = loaded.net.with_contact_branch(&cfg, &Device::flex());
+    let b1 = with.b1.as_ref().unwrap().weight.val().into_data().try_to_vec::<f32>().unwrap();
+    assert_eq!(d1, b1, "the branch starts as a copy of d1");
+    let bias = with.contact.as_ref().unwrap().bias.as_ref().unwrap().val().into_data().try_to_vec::<f32>().unwrap();
+    assert_eq!(bias, vec![-3.0]);
+
+    // Frozen training from the plain file: three steps on the contact loss alone.
+    let out = dir.path().join("frozen.safetensors");
+    let report = train_segmenter(SegTrainConfig {
+        objects: std::sync::Arc::new(set.clone()),
+        out: out.clone(),
+        minutes: None,
+        steps: Some(3),
+        resume: Some(plain_path.clone()),
+        batch: 2,
+        lr: 1e-2,
+        weight_frames: 2,
+        val_frames: 2,
+        data_threads: 1,
+        checkpoint_dir: dir.path().join("ck"),
+        progress: false,
+        offsets: false,
+        contacts: true,
+        freeze_trunk: true,
+        sampler: fusepose_scene::sampler::SamplerConfig { pair_probability: 1.0, ..Default::default() },
+        ..SegTrainConfig::default()
+    })
+    .unwrap();
+    assert!(report.config.contacts && !report.config.offsets);
+    let (before, after) = (SegFile::read(&plain_path).unwrap(), SegFile::read(&out).unwrap());
+    for (name, _) in plain.tensor_shapes() {
+        assert_eq!(before.tensor(&name).unwrap(), after.tensor(&name).unwrap(), "{name} changed");
+    }
+    assert!(after.tensor("contact.weight").unwrap().iter().any(|&w| w != 0.0), "the contact head learned nothing");
+    assert_ne!(after.tensor("b1.weight").unwrap(), before.tensor("d1.weight").unwrap(), "the branch learned nothing");
+}

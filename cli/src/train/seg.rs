@@ -141,6 +141,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         offset_weight: args.seg_offset_weight,
         offset_branch: args.seg_offset_branch,
         freeze_trunk: args.seg_freeze_trunk,
+        contacts: args.seg_contacts,
         device: args.device,
         ..SegTrainConfig::default()
     };

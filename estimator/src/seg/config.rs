@@ -13,6 +13,10 @@
 //! [`SegConfig::offset_branch`] the offset head reads its own 3x3 layer `o1`
 //! (same input and width as `d1`) instead of `d1`, so offsets can be trained
 //! onto a finished segmenter without touching its class outputs.
+//! With [`SegConfig::contacts`], a branch `b1` (3x3, as `o1`) and a 1x1 head
+//! `contact` (`dec[2] → 1`) give each cell's logit of lying where two object
+//! instances touch; the second look cuts a region along them
+//! (`crate::recut::CutProposal::Contacts`).
 
 use serde::{Deserialize, Serialize};
 
@@ -43,6 +47,10 @@ pub struct SegConfig {
     /// rather than reading `d1` (files written before it existed read as `false`).
     #[serde(default)]
     pub offset_branch: bool,
+    /// Whether the file has the contact branch `b1` and head `contact`
+    /// (files written before it existed read as `false`).
+    #[serde(default)]
+    pub contacts: bool,
 }
 
 /// Size of a 3x3, padding-1 convolution's output along one axis.
@@ -63,6 +71,7 @@ impl SegConfig {
             dec: [32, 16, 16],
             offsets: true,
             offset_branch: false,
+            contacts: false,
         }
     }
 
@@ -123,6 +132,10 @@ impl SegConfig {
         if self.offsets {
             layers.push(("offset", d1, 2, 1, 1));
         }
+        if self.contacts {
+            layers.push(("b1", d2 + c1, d1, 3, 1));
+            layers.push(("contact", d1, 1, 1, 1));
+        }
         layers
     }
 
@@ -146,7 +159,7 @@ impl SegConfig {
         let s = self.sizes();
         let at = |level: usize| s[level].0 * s[level].1;
         // Output resolution of each layer in `layers()` order.
-        let levels = [1, 2, 3, 4, 3, 2, 1, 1, 1, 1];
+        let levels = [1, 2, 3, 4, 3, 2, 1, 1, 1, 1, 1, 1];
         self.layers().into_iter().zip(levels).map(|((_, i, o, k, _), l)| at(l) * o * i * k * k).sum()
     }
 }
@@ -187,6 +200,14 @@ mod tests {
         // A branch without the head is no layer at all.
         let no_head = SegConfig { offsets: false, offset_branch: true, ..SegConfig::new(8) };
         assert_eq!(no_head.layers().len(), 8);
+        // The contact branch: `b1` like d1, then a one-channel head, after the offset layers.
+        let contacts = SegConfig { offsets: false, contacts: true, ..SegConfig::new(8) };
+        assert_eq!(contacts.tensor_shapes().len(), 20);
+        assert_eq!(contacts.tensor_shapes()[16], ("b1.weight".to_string(), vec![16, 32, 3, 3]));
+        assert_eq!(contacts.tensor_shapes()[18], ("contact.weight".to_string(), vec![1, 16, 1, 1]));
+        assert_eq!(contacts.macs(), expect + 4800 * 16 * 288 + 4800 * 16);
+        let both = SegConfig { offset_branch: true, contacts: true, ..SegConfig::new(8) };
+        assert_eq!(both.layers().iter().map(|l| l.0).collect::<Vec<_>>()[8..], ["o1", "offset", "b1", "contact"]);
     }
 
     #[test]

@@ -267,6 +267,14 @@ pub struct SegEngine {
     votes_pending: bool,
     /// `[2, H1*W1]`: centre offsets (x, y) when the file has the offset head, else empty.
     offsets: Vec<f32>,
+    /// Index of `b1` in `layers` (`contact` follows it) when the file has the contact branch.
+    contact_layer: Option<usize>,
+    /// `[d1, H1*W1]`: the contact branch's features, empty without it.
+    b1: Vec<f32>,
+    /// `[H1*W1]`: contact logits of the last forward pass ([`SegEngine::compute_contacts`]).
+    contacts: Vec<f32>,
+    /// Whether `contacts` are not yet those of the last forward pass.
+    contacts_pending: bool,
     /// Instance id per cell of the last [`SegEngine::segment_instances`].
     cell_ids: Vec<u16>,
     /// Instance id → class id of the last [`SegEngine::segment_instances`] (index 0 = background).
@@ -328,6 +336,7 @@ impl SegEngine {
         }
         let s = c.sizes();
         let hw = |l: usize| s[l].0 * s[l].1;
+        let contact_layer = c.layers().iter().position(|l| l.0 == "b1");
         let [c1, c2, c3, c4] = c.enc;
         let [d3, d2, d1] = c.dec;
         let cols = c
@@ -355,6 +364,10 @@ impl SegEngine {
             offsets: if c.offsets { vec![0.0; 2 * hw(1)] } else { Vec::new() },
             o1: if c.offsets && c.offset_branch { vec![0.0; d1 * hw(1)] } else { Vec::new() },
             votes_pending: false,
+            contact_layer,
+            b1: if contact_layer.is_some() { vec![0.0; d1 * hw(1)] } else { Vec::new() },
+            contacts: if contact_layer.is_some() { vec![0.0; hw(1)] } else { Vec::new() },
+            contacts_pending: false,
             cell_ids: vec![0; hw(1)],
             instance_classes: Vec::with_capacity(hw(1) + 1),
             voting: Voting::new(s[1].1, s[1].0, VotingParams::default()),
@@ -422,6 +435,34 @@ impl SegEngine {
         let (dx, dy) = (*self.offsets.get(i)?, *self.offsets.get(out_w * out_h + i)?);
         let (dx, dy) = if dx.is_finite() && dy.is_finite() { (dx, dy) } else { (0.0, 0.0) };
         Some([cx as f32 + dx * OFFSET_UNIT_CELLS, cy as f32 + dy * OFFSET_UNIT_CELLS])
+    }
+
+    /// Contact logits of the last forward pass, `[out_h * out_w]`; empty
+    /// without the contact branch or until [`SegEngine::compute_contacts`].
+    pub fn contacts(&self) -> &[f32] {
+        if self.contacts_pending { &[] } else { &self.contacts }
+    }
+
+    /// Whether the file has the contact branch ([`SegEngine::contact_at`]).
+    pub fn has_contacts(&self) -> bool {
+        self.contact_layer.is_some()
+    }
+
+    /// The probability that the cell under frame pixel `(u, v)` lies where
+    /// two object instances touch, in the last segmentation. `None` without
+    /// the contact branch, before [`SegEngine::compute_contacts`] after a
+    /// segmentation, or off the frame.
+    pub fn contact_at(&self, u: usize, v: usize) -> Option<f32> {
+        let map = self.map.as_ref().filter(|_| self.contact_layer.is_some() && !self.contacts_pending)?;
+        let (w, h) = map.frame_size();
+        if u >= w || v >= h {
+            return None;
+        }
+        let (out_w, _) = map.grid_size();
+        let (cx, cy) = map.cell_of(u, v);
+        let logit = *self.contacts.get(cy * out_w + cx)?;
+        // A non-finite logit (a broken file) reads as no contact.
+        Some(if logit.is_finite() { 1.0 / (1.0 + (-logit).exp()) } else { 0.0 })
     }
 
     /// Whether the file has the centre-offset head, i.e. [`SegEngine::segment_instances`]
@@ -935,6 +976,7 @@ impl SegEngine {
         let mut out = ArrayViewMut2::from_shape((k, hw(1)), &mut self.logits[..]).expect("logits buffer");
         gemm_acc(head.w.view(), x, &mut out);
         self.votes_pending = self.config.offsets;
+        self.contacts_pending = self.contact_layer.is_some();
         // A head on `d1` costs little and is computed now; the branch (as much
         // as `d1` itself) only when voting is on or votes are asked for.
         if self.config.offsets && (!self.config.offset_branch || self.use_offsets) {
@@ -969,6 +1011,24 @@ impl SegEngine {
         }
         let mut out = ArrayViewMut2::from_shape((2, hw), &mut self.offsets[..]).expect("offset buffer");
         gemm_acc(offset.w.view(), x, &mut out);
+    }
+
+    /// Computes the contact logits of the last forward pass where they are
+    /// not yet (on demand, as the offset branch: the branch costs about as
+    /// much as `d1`, and only the second look reads it). Reads `cat1`.
+    pub fn compute_contacts(&mut self) {
+        let Some(li) = self.contact_layer.filter(|_| self.contacts_pending) else { return };
+        self.contacts_pending = false;
+        let s = self.config.sizes();
+        let hw = s[1].0 * s[1].1;
+        let (c1, [_, d2c, d1c]) = (self.config.enc[0], self.config.dec);
+        let (b1, head) = (&self.layers[li], &self.layers[li + 1]);
+        let view = ArrayViewMut2::from_shape((d1c, hw), &mut self.b1[..]).expect("b1 buffer");
+        conv3x3(&self.cat1, d2c + c1, s[1].0, s[1].1, 1, b1.w.view(), b1.b.view(), &mut self.cols, view);
+        self.contacts.fill(head.b[0]);
+        let x = ArrayView2::from_shape((d1c, hw), &self.b1[..]).expect("b1 buffer");
+        let mut out = ArrayViewMut2::from_shape((1, hw), &mut self.contacts[..]).expect("contact buffer");
+        gemm_acc(head.w.view(), x, &mut out);
     }
 
     /// Per-cell argmax of the logits (first maximum wins; NaN never wins).

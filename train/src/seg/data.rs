@@ -4,7 +4,9 @@
 //! inference see identical inputs), with the class at each output cell's
 //! centre as the target and, for the centre-offset head, the offset from each
 //! object cell to the centroid of its instance's visible pixels (cell units /
-//! [`OFFSET_UNIT_CELLS`]). Training augmentation: per-channel colour gain and
+//! [`OFFSET_UNIT_CELLS`]), and for the contact head each object cell with
+//! a cell of another instance among its eight neighbours ([`contact_targets`]).
+//! Training augmentation: per-channel colour gain and
 //! bias plus a global brightness shift on the normalised colour, and a
 //! horizontal flip of the full-resolution frame (input and target stay
 //! aligned). Background threads render the frames ([`SegStream`]).
@@ -35,6 +37,8 @@ pub struct SegSample {
     pub offsets: Vec<f32>,
     /// `[H1 * W1]` 1 where `offsets` is a target (object cells), else 0.
     pub offset_mask: Vec<f32>,
+    /// `[H1 * W1]` 1 on object cells next to another instance's cell, else 0.
+    pub contacts: Vec<f32>,
 }
 
 /// Renders scene `seed` (class labels, sensor noise) into `target`; `None` when
@@ -86,7 +90,7 @@ pub fn render_with(
 
 /// Class target and centre-offset target of every output cell from a frame's
 /// instance labels (`instance_at(pixel index)`) and its instance → class table.
-fn cell_targets(map: &FrameMap, labels: &[u16], lut: &[u16], cells: &mut [u16]) -> (Vec<f32>, Vec<f32>) {
+fn cell_targets(map: &FrameMap, labels: &[u16], lut: &[u16], cells: &mut [u16]) -> (Vec<f32>, Vec<f32>, Vec<f32>) {
     let (w, h) = map.frame_size();
     let (gw, gh) = map.grid_size();
     // Visible-pixel centroid of every instance, in cell coordinates (cell centres at integers).
@@ -117,7 +121,32 @@ fn cell_targets(map: &FrameMap, labels: &[u16], lut: &[u16], cells: &mut [u16]) 
         off[n + i] = ((cy - (i / gw) as f64) / OFFSET_UNIT_CELLS as f64) as f32;
         mask[i] = 1.0;
     }
-    (off, mask)
+    let contacts = contact_targets(&ids, gw, gh);
+    (off, mask, contacts)
+}
+
+/// 1 on every cell of an instance (`ids`, 0 = background, on a `w`×`h` grid)
+/// that has a cell of another instance among its eight neighbours, else 0:
+/// a band two cells wide where two objects touch or overlap in the image,
+/// whatever their classes (the second look cuts along it within one class).
+pub fn contact_targets(ids: &[u16], w: usize, h: usize) -> Vec<f32> {
+    let mut out = vec![0.0f32; ids.len()];
+    for y in 0..h {
+        for x in 0..w {
+            let id = ids[y * w + x];
+            if id == 0 {
+                continue;
+            }
+            let touches = (y.saturating_sub(1)..=(y + 1).min(h - 1)).any(|ny| {
+                (x.saturating_sub(1)..=(x + 1).min(w - 1)).any(|nx| {
+                    let other = ids[ny * w + nx];
+                    other != 0 && other != id
+                })
+            });
+            out[y * w + x] = f32::from(u8::from(touches));
+        }
+    }
+    out
 }
 
 /// A rendered frame (in `target`) as a borrowed view without labels.
@@ -156,7 +185,7 @@ pub fn frame_sample(
     let map = FrameMap::new(w, h, cfg);
     let mut input = vec![0.0; map.input_len()];
     let mut cells = vec![0u16; map.cells()];
-    let (offsets, offset_mask) = if augment && rng.random_bool(0.5) {
+    let (offsets, offset_mask, contacts) = if augment && rng.random_bool(0.5) {
         // Horizontal flip of the full-resolution frame, so input and target stay aligned exactly.
         let mut color = target.rgb().to_vec();
         let mut depth = target.depth_m().to_vec();
@@ -176,7 +205,7 @@ pub fn frame_sample(
         map.fill_input(&frame_view(k, target), &mut input);
         cell_targets(&map, target.labels(), &lut, &mut cells)
     };
-    let mut s = SegSample { input, target: cells, offsets, offset_mask };
+    let mut s = SegSample { input, target: cells, offsets, offset_mask, contacts };
     if augment {
         jitter_colour(&mut s, cfg, &mut rng);
     }
@@ -271,6 +300,27 @@ impl SegStream {
 #[cfg(test)]
 mod cast_tests {
     use super::*;
+
+    #[test]
+    fn contacts_are_the_cells_where_two_instances_meet() {
+        // 6x3 grid: instances 1 and 2 side by side, 3 apart from both by background.
+        #[rustfmt::skip]
+        let ids: Vec<u16> = vec![
+            1, 1, 2, 2, 0, 3,
+            1, 1, 2, 2, 0, 3,
+            1, 1, 1, 2, 0, 3,
+        ];
+        let c = contact_targets(&ids, 6, 3);
+        #[rustfmt::skip]
+        let want: Vec<f32> = vec![
+            0., 1., 1., 0., 0., 0.,
+            0., 1., 1., 1., 0., 0.,
+            0., 1., 1., 1., 0., 0.,
+        ];
+        assert_eq!(c, want);
+        // One instance alone has no contact anywhere.
+        assert!(contact_targets(&[0, 4, 4, 4, 4, 0], 3, 2).iter().all(|&v| v == 0.0));
+    }
 
     #[test]
     fn camera_casts_span_warm_to_cool_and_dim_to_bright() {

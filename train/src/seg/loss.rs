@@ -5,7 +5,7 @@
 //! away for a cleaner background.
 
 use burn::prelude::{Int, Tensor, TensorData};
-use burn::tensor::activation::log_softmax;
+use burn::tensor::activation::{log_sigmoid, log_softmax};
 
 /// Per-class weights `(1 / freq_c)^power` from pixel counts (one per output
 /// channel, background first), scaled so the pixel-weighted mean is 1; every
@@ -115,6 +115,23 @@ pub fn offset_l1(pred: Tensor<4>, target: &[f32], mask: &[f32]) -> Tensor<1> {
     ((pred - t).abs() * m).sum().mul_scalar(1.0 / norm)
 }
 
+/// Contact classification: binary cross-entropy of the contact logits
+/// `pred [B, 1, H, W]` against `target` (0 or 1 per cell) over the cells
+/// with `mask` 1 (object cells; background cells are cut by the class
+/// head, not by contacts), contact cells weighted `positive_weight` (they
+/// are a few in a hundred), normalised by the summed weights.
+pub fn contact_bce(pred: Tensor<4>, target: &[f32], mask: &[f32], positive_weight: f32) -> Tensor<1> {
+    let [b, _, h, w] = pred.dims();
+    let device = pred.device();
+    let weights: Vec<f32> =
+        target.iter().zip(mask).map(|(&t, &m)| m * if t > 0.5 { positive_weight } else { 1.0 }).collect();
+    let norm = weights.iter().sum::<f32>().max(1.0);
+    let t = Tensor::<4>::from_data(TensorData::new(target.to_vec(), [b, 1, h, w]), &device);
+    let wt = Tensor::<4>::from_data(TensorData::new(weights, [b, 1, h, w]), &device);
+    let per_cell = t.clone() * log_sigmoid(pred.clone()) + t.neg().add_scalar(1.0) * log_sigmoid(pred.neg());
+    (per_cell * wt).sum().mul_scalar(-1.0 / norm)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -172,6 +189,17 @@ mod tests {
         let loss = weighted_cross_entropy_scaled(l, &[1, 0], &[1.0, 3.0], Some(&[2.0, 1.0]));
         let v = loss.into_data().try_to_vec::<f32>().unwrap()[0];
         let expect = -(6.0 * (0.75f32).ln() + (0.5f32).ln()) / 7.0;
+        assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
+    }
+
+    #[test]
+    fn contact_loss_matches_hand_computation() {
+        let device = Device::flex();
+        // Three cells: a contact at logit ln 3 (p = 3/4), no contact at 0 (p = 1/2), a masked cell.
+        let p = Tensor::<4>::from_data(TensorData::new(vec![3f32.ln(), 0.0, 50.0], [1, 1, 1, 3]), &device);
+        let loss = contact_bce(p, &[1.0, 0.0, 0.0], &[1.0, 1.0, 0.0], 4.0);
+        let v = loss.into_data().try_to_vec::<f32>().unwrap()[0];
+        let expect = -(4.0 * 0.75f32.ln() + 0.5f32.ln()) / 5.0;
         assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
     }
 

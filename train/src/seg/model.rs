@@ -22,7 +22,8 @@ fn conv(i: usize, o: usize, k: usize, stride: usize, device: &Device) -> Conv2d 
 
 /// Encoder `e1..e4` (stride 2), decoder `d3, d2, d1` over `cat(up(prev), skip)`, 1x1 `head`,
 /// the optional 1x1 centre-offset head `offset` ([`SegConfig::offsets`]) and
-/// the optional branch `o1` it then reads instead of `d1` ([`SegConfig::offset_branch`]).
+/// the optional branch `o1` it then reads instead of `d1` ([`SegConfig::offset_branch`]),
+/// and the optional contact branch `b1` with its 1x1 head `contact` ([`SegConfig::contacts`]).
 #[derive(Module, Debug)]
 pub struct SegNet {
     pub e1: Conv2d,
@@ -35,6 +36,16 @@ pub struct SegNet {
     pub head: Conv2d,
     pub o1: Option<Conv2d>,
     pub offset: Option<Conv2d>,
+    pub b1: Option<Conv2d>,
+    pub contact: Option<Conv2d>,
+}
+
+/// What one forward pass gives: class logits `[B, K+1, H1, W1]`, and where
+/// the network has them centre offsets `[B, 2, H1, W1]` and contact logits `[B, 1, H1, W1]`.
+pub struct SegOutputs {
+    pub logits: Tensor<4>,
+    pub offsets: Option<Tensor<4>>,
+    pub contacts: Option<Tensor<4>>,
 }
 
 fn up(x: Tensor<4>, like: &Tensor<4>) -> Tensor<4> {
@@ -57,7 +68,22 @@ impl SegNet {
             head: next(),
             o1: (c.offsets && c.offset_branch).then(&mut next),
             offset: c.offsets.then(|| offset_head(c, device)),
+            b1: c.contacts.then(|| conv(c.dec[1] + c.enc[0], c.dec[2], 3, 1, device)),
+            contact: c.contacts.then(|| contact_head(c, device)),
         }
+    }
+
+    /// Adds the contact branch `b1`, a copy of `d1` as [`SegNet::with_offset_branch`]'s
+    /// `o1`, and a fresh contact head over it (sure of no contact at the start).
+    pub fn with_contact_branch(mut self, c: &SegConfig, device: &Device) -> Self {
+        if self.b1.is_none() {
+            let mut b1 = conv(c.dec[1] + c.enc[0], c.dec[2], 3, 1, device);
+            b1.weight = Param::from_tensor(self.d1.weight.val());
+            b1.bias = self.d1.bias.as_ref().map(|b| Param::from_tensor(b.val()));
+            self.b1 = Some(b1);
+            self.contact = Some(contact_head(c, device));
+        }
+        self
     }
 
     /// Adds the offset branch `o1`, a copy of `d1` (so the branch starts with
@@ -87,7 +113,13 @@ impl SegNet {
     /// Stops gradient tracking for every layer but the offset branch and head,
     /// so a step on the offset loss alone neither changes nor records the
     /// trunk (an autodiff graph of layers no loss reaches is never freed).
-    pub fn frozen_trunk(mut self) -> Self {
+    /// With `contacts_only`, the offset branch and head are frozen too and
+    /// only the contact branch learns.
+    pub fn frozen_trunk(mut self, contacts_only: bool) -> Self {
+        if contacts_only {
+            self.o1 = self.o1.map(|l| l.no_grad());
+            self.offset = self.offset.map(|l| l.no_grad());
+        }
         for layer in [
             &mut self.e1,
             &mut self.e2,
@@ -110,6 +142,12 @@ impl SegNet {
 
     /// Logits and, with the offset head, centre offsets `[B, 2, H1, W1]`.
     pub fn forward_all(&self, x: Tensor<4>) -> (Tensor<4>, Option<Tensor<4>>) {
+        let out = self.forward_outputs(x);
+        (out.logits, out.offsets)
+    }
+
+    /// Every output the network has.
+    pub fn forward_outputs(&self, x: Tensor<4>) -> SegOutputs {
         let e1 = relu(self.e1.forward(x));
         let e2 = relu(self.e2.forward(e1.clone()));
         let e3 = relu(self.e3.forward(e2.clone()));
@@ -120,11 +158,13 @@ impl SegNet {
         let d1 = relu(self.d1.forward(cat1.clone()));
         let offsets = self.offset.as_ref().map(|o| {
             o.forward(match &self.o1 {
-                Some(o1) => relu(o1.forward(cat1)),
+                Some(o1) => relu(o1.forward(cat1.clone())),
                 None => d1.clone(),
             })
         });
-        (self.head.forward(d1), offsets)
+        let contacts =
+            self.b1.as_ref().zip(self.contact.as_ref()).map(|(b1, head)| head.forward(relu(b1.forward(cat1))));
+        SegOutputs { logits: self.head.forward(d1), offsets, contacts }
     }
 }
 
@@ -133,4 +173,12 @@ impl SegNet {
 /// random gradients at the start.
 fn offset_head(c: &SegConfig, device: &Device) -> Conv2d {
     Conv2dConfig::new([c.dec[2], 2], [1, 1]).with_initializer(burn::nn::Initializer::Zeros).init(device)
+}
+
+/// The contact head starts sure of no contact anywhere (weights 0, bias
+/// −3: a probability of 5 %), as contacts are a few cells in a hundred.
+fn contact_head(c: &SegConfig, device: &Device) -> Conv2d {
+    let mut head = Conv2dConfig::new([c.dec[2], 1], [1, 1]).with_initializer(burn::nn::Initializer::Zeros).init(device);
+    head.bias = Some(Param::from_tensor(Tensor::<1>::full([1], -3.0, device)));
+    head
 }

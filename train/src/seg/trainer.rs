@@ -22,7 +22,7 @@ use fusepose_scene::ObjectSet;
 use fusepose_scene::builtin::builtin_objects;
 
 use super::data::{SegSample, SegStream};
-use super::loss::{class_weights, offset_l1, small_region_weights, weighted_cross_entropy_scaled};
+use super::loss::{class_weights, contact_bce, offset_l1, small_region_weights, weighted_cross_entropy_scaled};
 use super::model::SegNet;
 use super::store;
 use super::validate::{self, SegValidation};
@@ -81,6 +81,12 @@ pub struct SegTrainConfig {
     /// ([`SegNet::frozen_trunk`]) and stays bit for bit as it was (its class
     /// outputs unchanged).
     pub freeze_trunk: bool,
+    /// Train the contact branch and head ([`SegConfig::contacts`]; added to a
+    /// resumed file that lacks them, `b1` copied from `d1`). With
+    /// `freeze_trunk` they learn alone, on the contact loss.
+    pub contacts: bool,
+    /// Weight of a contact cell against a cell without one in the contact loss.
+    pub contact_positive_weight: f32,
     /// Largest lift of a small object region's cells in the cross-entropy
     /// ([`small_region_weights`], reference [`SMALL_REGION_CELLS`]); 1 = off.
     pub small_region_boost: f32,
@@ -120,6 +126,8 @@ impl Default for SegTrainConfig {
             offset_weight: 1.0,
             offset_branch: false,
             freeze_trunk: false,
+            contacts: false,
+            contact_positive_weight: 5.0,
             small_region_boost: 1.0,
             sampler: fusepose_scene::sampler::SamplerConfig::training(),
             cast_augment: 0.0,
@@ -176,6 +184,8 @@ fn hyper_json(cfg: &SegTrainConfig, weights: &[f32]) -> serde_json::Value {
         "offset_weight": cfg.offset_weight,
         "offset_branch": cfg.offset_branch,
         "freeze_trunk": cfg.freeze_trunk,
+        "contacts": cfg.contacts,
+        "contact_positive_weight": cfg.contact_positive_weight,
         "small_region_boost": cfg.small_region_boost,
         "small_region_cells": SMALL_REGION_CELLS,
         "data": format!(
@@ -258,12 +268,14 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
     if cfg.minutes.is_none() && cfg.steps.is_none() {
         bail!("give a time (minutes) or step budget");
     }
-    if cfg.freeze_trunk && (!cfg.offsets || cfg.resume.is_none()) {
+    if cfg.freeze_trunk && (!(cfg.offsets || cfg.contacts) || cfg.resume.is_none()) {
         bail!(
-            "freezing the trunk trains the centre-offset head alone: it needs the offsets on and a trained \
-             segmenter to resume (--resume FILE)"
+            "freezing the trunk trains the centre-offset or contact head alone: it needs one of them on and a \
+             trained segmenter to resume (--resume FILE)"
         );
     }
+    // Frozen with the contacts on, only the contact branch learns.
+    let contacts_only = cfg.freeze_trunk && cfg.contacts;
     let device = cfg.device.autodiff()?;
     device.seed(cfg.seed);
     let objects = object_entries(&set);
@@ -309,18 +321,27 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
                 arch.offset_branch = true;
                 net = net.with_offset_branch(&arch, &device);
             }
+            if cfg.contacts && !arch.contacts && trains {
+                arch.contacts = true;
+                net = net.with_contact_branch(&arch, &device);
+            }
             (net, arch, record)
         }
         None if cfg.warm_start.is_some() => {
             let path = cfg.warm_start.as_ref().expect("checked");
-            let (net, arch, w) = warm_start(path, set.len(), cfg.offsets, cfg.offset_branch, &device)?;
+            let (mut net, mut arch, w) = warm_start(path, set.len(), cfg.offsets, cfg.offset_branch, &device)?;
             log.line(&w.log_line(path));
+            if cfg.contacts && !arch.contacts {
+                arch.contacts = true;
+                net = net.with_contact_branch(&arch, &device);
+            }
             (net, arch, TrainRecord { seed: cfg.seed, ..TrainRecord::default() })
         }
         None => {
             let mut arch = cfg.arch.clone().unwrap_or_else(|| SegConfig::new(set.len()));
             arch.offsets = cfg.offsets;
             arch.offset_branch = cfg.offsets && cfg.offset_branch;
+            arch.contacts = cfg.contacts;
             arch.validate().map_err(|m| anyhow::anyhow!("architecture: {m}"))?;
             if arch.num_classes != set.len() {
                 bail!("architecture has {} classes, the object set {}", arch.num_classes, set.len());
@@ -329,7 +350,7 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         }
     };
     if cfg.freeze_trunk {
-        net = net.frozen_trunk();
+        net = net.frozen_trunk(contacts_only);
     }
     record.batch = cfg.batch;
     record.data = "builtin scene sampler, rendered on the fly with sensor noise".into();
@@ -425,8 +446,14 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
             &device,
         );
         let target: Vec<u16> = batch.iter().flat_map(|s| s.target.iter().copied()).collect();
-        let (logits, offsets) = net.forward_all(input);
+        let out = net.forward_outputs(input);
+        let (logits, offsets) = (out.logits, out.offsets.filter(|_| !contacts_only));
         let [_, _, h1, w1] = logits.dims();
+        let contact_loss = out.contacts.filter(|_| cfg.contacts).map(|pred| {
+            let t: Vec<f32> = batch.iter().flat_map(|s| s.contacts.iter().copied()).collect();
+            let m: Vec<f32> = target.iter().map(|&c| f32::from(u8::from(c != 0))).collect();
+            contact_bce(pred, &t, &m, cfg.contact_positive_weight)
+        });
         let offset_loss = offsets.map(|pred| {
             let t: Vec<f32> = batch.iter().flat_map(|s| s.offsets.iter().copied()).collect();
             let m: Vec<f32> = batch.iter().flat_map(|s| s.offset_mask.iter().copied()).collect();
@@ -438,10 +465,8 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
                 .then(|| small_region_weights(&target, w1, h1, SMALL_REGION_CELLS, cfg.small_region_boost));
             weighted_cross_entropy_scaled(logits, &target, &weights, scale.as_deref())
         });
-        let loss = match (class_loss, offset_loss) {
-            (Some(c), Some(o)) => c + o,
-            (Some(l), None) | (None, Some(l)) => l,
-            (None, None) => bail!("a frozen trunk leaves only the offset head to train, and there is none"),
+        let Some(loss) = [class_loss, offset_loss, contact_loss].into_iter().flatten().reduce(|a, b| a + b) else {
+            bail!("a frozen trunk leaves only the offset or contact head to train, and there is none");
         };
         let lv = loss.clone().into_data().try_to_vec::<f32>().ok().and_then(|v| v.first().copied()).unwrap_or(f32::NAN)
             as f64;
