@@ -148,19 +148,7 @@ impl ContactCut {
                 self.queue.push(p as u32);
             }
         }
-        let mut head = 0;
-        while head < self.queue.len() {
-            let q = self.queue[head] as usize;
-            head += 1;
-            let piece = self.label[q];
-            for (nu, nv) in neighbours(q % w, q / w, bbox) {
-                let n = nv * w + nu;
-                if self.label[n] == 0 && in_region(n) {
-                    self.label[n] = piece;
-                    self.queue.push(n as u32);
-                }
-            }
-        }
+        self.flood(bbox, |n| in_region(n));
         // Region pixels no path reaches (the region is not connected within
         // its box) join the first piece: they are too few to change a pose.
         for (_, _, p) in pixels() {
@@ -207,23 +195,30 @@ impl ContactCut {
         for l in 0..LEVELS {
             self.queue.clear();
             self.queue.extend(pixels().filter(|&p| self.label[p] != 0).map(|p| p as u32));
-            let mut head = 0;
-            while head < self.queue.len() {
-                let q = self.queue[head] as usize;
-                head += 1;
-                let piece = self.label[q];
-                for (nu, nv) in neighbours(q % w, q / w, bbox) {
-                    let n = nv * w + nu;
-                    if self.label[n] == 0 && in_region(n) && level(n) <= l {
-                        self.label[n] = piece;
-                        self.queue.push(n as u32);
-                    }
-                }
-            }
+            self.flood(bbox, |n| in_region(n) && level(n) <= l);
         }
         for p in pixels() {
             if self.label[p] == 0 && in_region(p) {
                 self.label[p] = 1;
+            }
+        }
+    }
+
+    /// Breadth first from the queued pixels: each unlabelled pixel of `bbox`
+    /// that `admit`s takes the label of the neighbour that reached it first.
+    fn flood(&mut self, bbox: [usize; 4], admit: impl Fn(usize) -> bool) {
+        let w = self.width;
+        let mut head = 0;
+        while head < self.queue.len() {
+            let q = self.queue[head] as usize;
+            head += 1;
+            let piece = self.label[q];
+            for (nu, nv) in neighbours(q % w, q / w, bbox) {
+                let n = nv * w + nu;
+                if self.label[n] == 0 && admit(n) {
+                    self.label[n] = piece;
+                    self.queue.push(n as u32);
+                }
             }
         }
     }
