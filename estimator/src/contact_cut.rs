@@ -148,7 +148,7 @@ impl ContactCut {
                 self.queue.push(p as u32);
             }
         }
-        self.flood(bbox, |n| in_region(n));
+        self.flood(bbox, &in_region);
         // Region pixels no path reaches (the region is not connected within
         // its box) join the first piece: they are too few to change a pose.
         for (_, _, p) in pixels() {

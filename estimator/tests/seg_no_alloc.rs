@@ -60,7 +60,12 @@ fn allocations_in(f: impl FnOnce()) -> usize {
 }
 
 fn engine(set: &ObjectSet) -> SegEngine {
-    let file = SegFile::from_bytes(&weight_bytes(&SegConfig::new(set.len()), set)).unwrap();
+    engine_with(&SegConfig::new(set.len()), set)
+}
+
+/// An engine of architecture `cfg` with random weights.
+fn engine_with(cfg: &SegConfig, set: &ObjectSet) -> SegEngine {
+    let file = SegFile::from_bytes(&weight_bytes(cfg, set)).unwrap();
     file.check_objects(set).unwrap();
     SegEngine::new(&file).unwrap()
 }
@@ -197,9 +202,7 @@ fn a_background_offset_labels_more_cells_as_objects_and_zero_is_the_argmax() {
 #[test]
 fn the_offset_branch_runs_on_demand_without_allocating() {
     let set = object_set(&[l_block(), step_block()]);
-    let cfg = SegConfig { offset_branch: true, ..SegConfig::new(set.len()) };
-    let file = SegFile::from_bytes(&weight_bytes(&cfg, &set)).unwrap();
-    let mut engine = SegEngine::new(&file).unwrap();
+    let mut engine = engine_with(&SegConfig { offset_branch: true, ..SegConfig::new(set.len()) }, &set);
     let (c0, d0) = frame_planes(0);
     let (c1, d1) = frame_planes(40);
     let mut labels = vec![0u16; 640 * 480];
@@ -225,9 +228,7 @@ fn the_offset_branch_runs_on_demand_without_allocating() {
 #[test]
 fn the_contact_branch_runs_on_demand_without_allocating() {
     let set = object_set(&[l_block(), step_block()]);
-    let cfg = SegConfig { offsets: false, contacts: true, ..SegConfig::new(set.len()) };
-    let file = SegFile::from_bytes(&weight_bytes(&cfg, &set)).unwrap();
-    let mut engine = SegEngine::new(&file).unwrap();
+    let mut engine = engine_with(&SegConfig { offsets: false, contacts: true, ..SegConfig::new(set.len()) }, &set);
     let (c0, d0) = frame_planes(0);
     let (c1, d1) = frame_planes(40);
     let mut labels = vec![0u16; 640 * 480];

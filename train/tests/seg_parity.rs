@@ -46,6 +46,40 @@ fn save_random(cfg: &SegConfig, set: &ObjectSet, path: &std::path::Path) -> SegN
     net
 }
 
+/// A segmenter file without offsets or contacts (as the shipped one), its
+/// config, path and network.
+fn plain_segmenter(set: &ObjectSet, dir: &Scratch) -> (SegConfig, std::path::PathBuf, SegNet) {
+    let plain = SegConfig { offsets: false, ..SegConfig::new(set.len()) };
+    let path = dir.path().join("plain.safetensors");
+    save_random(&plain, set, &path);
+    let net = store::load(&path, &Device::flex()).unwrap().net;
+    (plain, path, net)
+}
+
+/// Three training steps with the trunk frozen, written to `out` (a branch and `resume` to set).
+fn frozen_steps(set: &ObjectSet, dir: &Scratch, out: &std::path::Path) -> fusepose_train::seg::SegTrainConfig {
+    fusepose_train::seg::SegTrainConfig {
+        objects: std::sync::Arc::new(set.clone()),
+        out: out.to_path_buf(),
+        minutes: None,
+        steps: Some(3),
+        batch: 2,
+        lr: 1e-2,
+        weight_frames: 2,
+        val_frames: 2,
+        data_threads: 1,
+        checkpoint_dir: dir.path().join("ck"),
+        progress: false,
+        freeze_trunk: true,
+        ..Default::default()
+    }
+}
+
+/// An RGB frame with depth in metres and no labels.
+fn rgb_view<'a>(k: Intrinsics, color: &'a [u8], depth: &'a [f32]) -> FrameView<'a> {
+    FrameView { intrinsics: k, color_format: ColorFormat::Rgb8, color, depth: DepthPlane::F32(depth), labels: None }
+}
+
 fn burn_logits(net: &SegNet, cfg: &SegConfig, input: &[f32]) -> Vec<f32> {
     let x = Tensor::<4>::from_data(
         TensorData::new(input.to_vec(), [1, 4, cfg.input_height, cfg.input_width]),
@@ -176,13 +210,7 @@ fn segment_labels_are_argmax_of_burn_logits() {
         (0..w * h).flat_map(|p| [(p % w / 3) as u8, (p / w / 2) as u8, ((p % w + p / w) / 5) as u8]).collect();
     let depth: Vec<f32> = (0..w * h).map(|p| if p % 97 == 0 { 0.0 } else { 0.5 + (p % w) as f32 / 640.0 }).collect();
     let k = Intrinsics::YCB_VIDEO;
-    let frame = FrameView {
-        intrinsics: k,
-        color_format: ColorFormat::Rgb8,
-        color: &color,
-        depth: DepthPlane::F32(&depth),
-        labels: None,
-    };
+    let frame = rgb_view(k, &color, &depth);
     let mut labels = vec![u16::MAX; w * h];
     engine.segment(&frame, &mut labels).unwrap();
     // The engine's input is what the trainer feeds burn; its argmax is the labels.
@@ -358,35 +386,16 @@ fn offset_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
     assert_close(engine.offsets(), &offsets.unwrap().into_data().try_to_vec::<f32>().unwrap());
 
     // A trained file without offsets: the branch starts as d1 and the head at zero.
-    let plain = SegConfig { offsets: false, ..SegConfig::new(3) };
-    let plain_path = dir.path().join("plain.safetensors");
-    save_random(&plain, &set, &plain_path);
-    let loaded = store::load(&plain_path, &Device::flex()).unwrap();
-    let d1 = loaded.net.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
-    let with = loaded.net.with_offset_branch(&cfg, &Device::flex());
+    let (plain, plain_path, loaded) = plain_segmenter(&set, &dir);
+    let d1 = loaded.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
+    let with = loaded.with_offset_branch(&cfg, &Device::flex());
     let o1 = with.o1.as_ref().unwrap().weight.val().into_data().try_to_vec::<f32>().unwrap();
     assert_eq!(d1, o1, "the branch starts as a copy of d1");
 
     // Frozen training from the plain file: three steps on the offset loss alone.
     let out = dir.path().join("frozen.safetensors");
     let train = |resume: Option<std::path::PathBuf>| {
-        train_segmenter(SegTrainConfig {
-            objects: std::sync::Arc::new(set.clone()),
-            out: out.clone(),
-            minutes: None,
-            steps: Some(3),
-            resume,
-            batch: 2,
-            lr: 1e-2,
-            weight_frames: 2,
-            val_frames: 2,
-            data_threads: 1,
-            checkpoint_dir: dir.path().join("ck"),
-            progress: false,
-            offset_branch: true,
-            freeze_trunk: true,
-            ..SegTrainConfig::default()
-        })
+        train_segmenter(SegTrainConfig { resume, offset_branch: true, ..frozen_steps(&set, &dir, &out) })
     };
     let e = train(None).expect_err("freezing a fresh network is refused").to_string();
     assert!(e.contains("--resume"), "{e}");
@@ -433,13 +442,7 @@ fn contact_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
     let k = Intrinsics { fx: 300.0, fy: 300.0, cx: 159.5, cy: 119.5, width: 320, height: 240 };
     let color: Vec<u8> = (0..320 * 240 * 3).map(|i| (i * 31 % 251) as u8).collect();
     let depth = vec![0.6f32; 320 * 240];
-    let frame = FrameView {
-        intrinsics: k,
-        color_format: ColorFormat::Rgb8,
-        color: &color,
-        depth: DepthPlane::F32(&depth),
-        labels: None,
-    };
+    let frame = rgb_view(k, &color, &depth);
     let mut labels = vec![0u16; 320 * 240];
     engine.segment(&frame, &mut labels).unwrap();
     assert_eq!(engine.contact_at(100, 50), None, "not yet computed for this frame");
@@ -452,12 +455,9 @@ fn contact_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
     assert_eq!(engine.contact_at(320, 0), None, "off the frame");
 
     // A trained file without the branch: b1 starts as d1, the head at 5 %.
-    let plain = SegConfig { offsets: false, ..SegConfig::new(3) };
-    let plain_path = dir.path().join("plain.safetensors");
-    save_random(&plain, &set, &plain_path);
-    let loaded = store::load(&plain_path, &Device::flex()).unwrap();
-    let d1 = loaded.net.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
-    let with = loaded.net.with_contact_branch(&cfg, &Device::flex());
+    let (plain, plain_path, loaded) = plain_segmenter(&set, &dir);
+    let d1 = loaded.d1.weight.val().into_data().try_to_vec::<f32>().unwrap();
+    let with = loaded.with_contact_branch(&cfg, &Device::flex());
     let b1 = with.b1.as_ref().unwrap().weight.val().into_data().try_to_vec::<f32>().unwrap();
     assert_eq!(d1, b1, "the branch starts as a copy of d1");
     let bias = with.contact.as_ref().unwrap().bias.as_ref().unwrap().val().into_data().try_to_vec::<f32>().unwrap();
@@ -466,23 +466,11 @@ fn contact_branch_matches_burn_and_frozen_training_keeps_the_trunk() {
     // Frozen training from the plain file: three steps on the contact loss alone.
     let out = dir.path().join("frozen.safetensors");
     let report = train_segmenter(SegTrainConfig {
-        objects: std::sync::Arc::new(set.clone()),
-        out: out.clone(),
-        minutes: None,
-        steps: Some(3),
         resume: Some(plain_path.clone()),
-        batch: 2,
-        lr: 1e-2,
-        weight_frames: 2,
-        val_frames: 2,
-        data_threads: 1,
-        checkpoint_dir: dir.path().join("ck"),
-        progress: false,
         offsets: false,
         contacts: true,
-        freeze_trunk: true,
         sampler: fusepose_scene::sampler::SamplerConfig { pair_probability: 1.0, ..Default::default() },
-        ..SegTrainConfig::default()
+        ..frozen_steps(&set, &dir, &out)
     })
     .unwrap();
     assert!(report.config.contacts && !report.config.offsets);
