@@ -77,10 +77,7 @@ impl SegNet {
     /// `o1`, and a fresh contact head over it (sure of no contact at the start).
     pub fn with_contact_branch(mut self, c: &SegConfig, device: &Device) -> Self {
         if self.b1.is_none() {
-            let mut b1 = conv(c.dec[1] + c.enc[0], c.dec[2], 3, 1, device);
-            b1.weight = Param::from_tensor(self.d1.weight.val());
-            b1.bias = self.d1.bias.as_ref().map(|b| Param::from_tensor(b.val()));
-            self.b1 = Some(b1);
+            self.b1 = Some(self.copy_of_d1(c, device));
             self.contact = Some(contact_head(c, device));
         }
         self
@@ -92,13 +89,19 @@ impl SegNet {
     /// [`SegNet::frozen_trunk`] and the offset loss alone, only these two layers learn.
     pub fn with_offset_branch(mut self, c: &SegConfig, device: &Device) -> Self {
         if self.o1.is_none() {
-            let mut o1 = conv(c.dec[1] + c.enc[0], c.dec[2], 3, 1, device);
-            o1.weight = Param::from_tensor(self.d1.weight.val());
-            o1.bias = self.d1.bias.as_ref().map(|b| Param::from_tensor(b.val()));
-            self.o1 = Some(o1);
+            self.o1 = Some(self.copy_of_d1(c, device));
             self.offset = Some(offset_head(c, device));
         }
         self
+    }
+
+    /// A new layer over `d1`'s input holding `d1`'s weights: a branch that
+    /// starts with the class features a head could already read.
+    fn copy_of_d1(&self, c: &SegConfig, device: &Device) -> Conv2d {
+        let mut layer = conv(c.dec[1] + c.enc[0], c.dec[2], 3, 1, device);
+        layer.weight = Param::from_tensor(self.d1.weight.val());
+        layer.bias = self.d1.bias.as_ref().map(|b| Param::from_tensor(b.val()));
+        layer
     }
 
     /// Adds a freshly initialised offset head to a network loaded without one
