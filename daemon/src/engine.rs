@@ -907,6 +907,13 @@ impl PoseEngine {
                 let remask_start = fusepose_client::monotonic_ns();
                 let mut remask_estimates = 0;
                 let spare = self.deadline.is_none() || !(estimator.degraded() || estimator.shed() > 0);
+                // Sized now, not in the first spare frame, which may come
+                // minutes into a stream (RELIABILITY.md, "Memory in soaks").
+                if let Some((remask, net)) = self.remask.as_mut()
+                    && let Err(e) = remask.warm_up_for(frame, net.as_mut(), seed)
+                {
+                    tracing::debug!(error = %e, "warming the second masks up failed; they warm up on their first run");
+                }
                 if let (true, Some((remask, net)), Some(verifier), Some(ws)) =
                     (spare, self.remask.as_mut(), self.verifier.as_mut(), self.workspace.as_ref())
                 {

@@ -299,6 +299,23 @@ impl Remask {
         Ok(stats)
     }
 
+    /// Warms the second masks up for frames of `frame`'s size now, once per
+    /// size, as [`Remask::run`] does on its first frame: for a caller that
+    /// runs them only in some frames (the daemon, in frames with time to
+    /// spare), so that the first such frame, minutes into a stream, does not
+    /// allocate and fault in the second workspace's pages.
+    pub fn warm_up_for(
+        &mut self,
+        frame: &FrameView<'_>,
+        estimator: &mut dyn Estimator,
+        seed: u64,
+    ) -> Result<(), EstimateError> {
+        if self.config.is_on() && self.ids.len() != frame.width() * frame.height() {
+            self.warm_up(frame, estimator, seed)?;
+        }
+        Ok(())
+    }
+
     /// Once per frame size: sizes the plane and estimates a square mask at
     /// the frame's centre as class 1 in every slot, so that the second
     /// workspace and the estimator have met a frame of this size and their

@@ -281,7 +281,7 @@ fn second_look_without_allocations(
 fn second_mask_rig() -> (
     common::SyntheticFrame,
     common::SyntheticFrame,
-    impl FnMut(&common::SyntheticFrame, u64, bool) -> fusepose_estimator::remask::RemaskStats,
+    impl FnMut(&common::SyntheticFrame, u64, Option<bool>) -> fusepose_estimator::remask::RemaskStats,
 ) {
     use fusepose_estimator::remask::{Remask, RemaskConfig};
     use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig, verify_on_region};
@@ -299,7 +299,8 @@ fn second_mask_rig() -> (
     let whole = painted(render(&[(1, &l, truth)]));
     let (part, object_pixels) = common::left_part(painted(render(&[(1, &l, truth)])));
     let mut estimator = common::partial(truth, object_pixels);
-    let frame_of = move |frame: &common::SyntheticFrame, seed: u64, hanging: bool| {
+    // `hanging`: None = only warm the second masks up (`Remask::warm_up_for`).
+    let frame_of = move |frame: &common::SyntheticFrame, seed: u64, hanging: Option<bool>| {
         let view = frame.view();
         ws.prepare(&view, seed).unwrap();
         estimator.estimate(&view, &mut ws, &mut poses).unwrap();
@@ -307,13 +308,17 @@ fn second_mask_rig() -> (
         for p in poses.as_slice() {
             verdicts.push(verify_on_region(&mut verifier, &view, &ws, None, p).unwrap());
         }
-        if hanging {
+        if hanging == Some(true) {
             let mut p = poses.as_slice()[0];
             p.translation.z -= 0.2;
             poses.replace(0, p);
             verdicts[0] = Verification { passed: false, inlier_fraction: 0.5, ..verdicts[0] };
         }
         let mut pieces = common::partial(truth, object_pixels);
+        if hanging.is_none() {
+            remask.warm_up_for(&view, &mut pieces, seed).unwrap();
+            return Default::default();
+        }
         remask.run(&view, &ws, &mut poses, &mut verdicts, &mut pieces, &mut verifier, None, seed).unwrap()
     };
     (whole, part, frame_of)
@@ -325,7 +330,7 @@ fn second_mask_rig() -> (
 #[test]
 fn second_masks_do_not_allocate_after_warm_up() {
     let (whole, part, mut run) = second_mask_rig();
-    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| run(frame, seed, false).kept;
+    let mut frame_of = |frame: &common::SyntheticFrame, seed: u64| run(frame, seed, Some(false)).kept;
     // Warm-up on a frame whose pose passes: no second mask yet.
     assert_eq!(frame_of(&whole, 0), 0);
     for (i, frame) in [&part, &whole, &part].into_iter().enumerate() {
@@ -336,21 +341,35 @@ fn second_masks_do_not_allocate_after_warm_up() {
     }
 }
 
+/// A caller that runs the second masks only in some frames (the daemon)
+/// warms them up on its first frame: their first run, frames later,
+/// allocates nothing.
+#[test]
+fn second_masks_warmed_up_ahead_do_not_allocate_in_their_first_run() {
+    let (whole, part, mut run) = second_mask_rig();
+    // The frame's own workspace and estimator meet the frame; the second masks are only warmed up.
+    run(&whole, 0, None);
+    let mut stats = Default::default();
+    let n = allocations_in(|| stats = run(&part, 10, Some(false)));
+    assert_eq!(n, 0, "{n} allocations in the first run of the second masks");
+    assert_eq!(stats.kept, 1, "the failed pose replaced");
+}
+
 #[test]
 fn second_masks_too_thin_to_estimate_leave_nothing_behind() {
     use fusepose_estimator::remask::RemaskConfig;
 
     let (whole, part, mut frame_of) = second_mask_rig();
-    assert_eq!(frame_of(&whole, 0, false).tried, 0);
-    assert_eq!(frame_of(&part, 1, false).kept, 1, "warm-up: the second mask works");
+    assert_eq!(frame_of(&whole, 0, Some(false)).tried, 0);
+    assert_eq!(frame_of(&part, 1, Some(false)).kept, 1, "warm-up: the second mask works");
     // More frames than the remask keeps boxes for: a box left behind by
     // each would outgrow its list.
     for i in 0..2 * RemaskConfig::DEFAULT.max_regions + 2 {
         let mut stats = Default::default();
-        let n = allocations_in(|| stats = frame_of(&part, 10 + i as u64, true));
+        let n = allocations_in(|| stats = frame_of(&part, 10 + i as u64, Some(true)));
         assert_eq!(n, 0, "frame {i}: {n} allocations with every second mask too thin");
         assert_eq!((stats.tried, stats.kept, stats.estimates), (1, 0, 0), "frame {i}: tried, nothing estimated");
     }
     // The plane was left clear: the next frame's second mask is whole again.
-    assert_eq!(frame_of(&part, 99, false).kept, 1, "after the thin frames");
+    assert_eq!(frame_of(&part, 99, Some(false)).kept, 1, "after the thin frames");
 }
