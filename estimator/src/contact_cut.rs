@@ -8,7 +8,10 @@
 //! the meeting line from colour and depth: the region's pixels off the band
 //! fall into one connected part per copy, and each part is grown back over
 //! the band (breadth first, so every band pixel joins the part nearest it
-//! within the region).
+//! within the region). Where the band has gaps and parts nothing,
+//! [`ContactCut::grow`] floods pieces from given seeds (the second look's
+//! k-means centres) in order of the contact probability, so they meet on
+//! the band rather than halfway between the centres.
 //!
 //! Buffers are sized per frame size ([`ContactCut::resize`]); a cut
 //! allocates nothing.
@@ -201,6 +204,13 @@ impl ContactCut {
             if self.label[p] == 0 && in_region(p) {
                 self.label[p] = 1;
             }
+        }
+    }
+
+    /// The piece of each frame pixel `(u, v)` of `pixels` into `out` (as far as both reach).
+    pub fn pieces_of(&self, pixels: &[[u16; 2]], out: &mut [u8]) {
+        for (m, &[u, v]) in out.iter_mut().zip(pixels) {
+            *m = self.piece_at(v as usize * self.width + u as usize) as u8;
         }
     }
 

@@ -118,7 +118,9 @@ pub enum CutProposal {
     /// The votes only: a region whose votes point at one centre is not cut.
     VotesOnly,
     /// The segmenter's contact band where its file has the contact branch
-    /// and the band parts the region ([`crate::contact_cut`]); else the 3D points.
+    /// ([`crate::contact_cut`]): along the band where it parts the region,
+    /// else k-means pieces grown from their centres over it; without the
+    /// branch, the 3D points.
     Contacts,
 }
 
@@ -914,7 +916,8 @@ impl Recut {
     /// projected centres where it has no depth). Pieces must be even enough
     /// ([`MIN_PIECE_SHARE`]); a candidate no count cuts evenly is dropped.
     /// With `contacts`, a region the contact band parts into two or more
-    /// even pieces is cut along it instead ([`ContactCut`]).
+    /// even pieces is cut along it instead, and k-means pieces are grown
+    /// from their centres over the band ([`ContactCut::grow`]).
     /// Returns how many were cut along votes, and along contacts.
     fn cut(
         &mut self,
@@ -936,10 +939,8 @@ impl Recut {
         self.classes.fill(0);
         self.centres.clear();
         let all = ws.component_ids();
+        // `contact_cut` was sized with `ids` (`warm_up`): contacts come with the proposal only.
         let (mut kept, mut by_votes, mut by_contacts, mut base) = (0, 0, 0, 0u16);
-        if contacts.is_some() {
-            self.contact_cut.resize(w, h);
-        }
         for c in 0..self.candidates.len() {
             let pose = poses[self.candidates[c].pose];
             let Some(id) = ws.component_id(pose.instance_id as usize) else { continue };
@@ -1002,9 +1003,7 @@ impl Recut {
             // The contact band's pieces, when it parts the region evenly.
             let contact_pieces = contacts.and_then(|map| {
                 let k = self.contact_cut.cut([u0, v0, u1, v1], in_region, map, most)?;
-                for (m, &[u, v]) in self.cluster.iter_mut().zip(&self.sample_pixels) {
-                    *m = self.contact_cut.piece_at(v as usize * w + u as usize) as u8;
-                }
+                self.contact_cut.pieces_of(&self.sample_pixels, &mut self.cluster);
                 even(&self.cluster[..n], k).then_some(k)
             });
             let ids = &mut self.ids;
@@ -1073,9 +1072,7 @@ impl Recut {
                     });
                     self.contact_cut.grow([u0, v0, u1, v1], in_region, map, seeds);
                     let mut moved = [0u8; SAMPLES];
-                    for (m, &[u, v]) in moved.iter_mut().zip(&self.sample_pixels) {
-                        *m = self.contact_cut.piece_at(v as usize * w + u as usize) as u8;
-                    }
+                    self.contact_cut.pieces_of(&self.sample_pixels, &mut moved);
                     even(&moved[..n], k)
                 });
                 if grown {
