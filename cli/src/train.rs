@@ -144,6 +144,12 @@ pub struct Args {
     /// `--stage seg`: network input size `WxH` of a fresh run (default 160x120).
     #[arg(long)]
     pub seg_size: Option<String>,
+    /// `--stage seg`: channel widths `E1,E2,E3,E4/D3,D2,D1` (default
+    /// 16,32,64,64/32,16,16): a fresh run's architecture, or, with `--resume`,
+    /// the widths the resumed segmenter is widened to before training (the
+    /// same function at first: the new channels start with no influence).
+    #[arg(long, value_name = "ENC/DEC")]
+    pub seg_widths: Option<String>,
     /// `--stage seg`: lift each small object region's cells in the loss by up
     /// to this factor (√(200 cells / region cells), so partly hidden and far
     /// objects are not given up for a cleaner background; 1 = off).

@@ -23,6 +23,18 @@ fn parse_size(s: &str) -> anyhow::Result<(usize, usize)> {
     Ok((w.trim().parse().context("--seg-size width")?, h.trim().parse().context("--seg-size height")?))
 }
 
+/// Parses `E1,E2,E3,E4/D3,D2,D1` (e.g. `24,48,96,96/48,24,24`).
+fn parse_widths(s: &str) -> anyhow::Result<([usize; 4], [usize; 3])> {
+    let bad =
+        || anyhow::anyhow!("--seg-widths `{s}`: expected four encoder and three decoder widths, E1,E2,E3,E4/D3,D2,D1");
+    let (e, d) = s.split_once('/').ok_or_else(bad)?;
+    let list = |part: &str| -> anyhow::Result<Vec<usize>> {
+        part.split(',').map(|w| w.trim().parse::<usize>().map_err(|_| bad())).collect()
+    };
+    let (e, d) = (list(e)?, list(d)?);
+    Ok((e.try_into().map_err(|_| bad())?, d.try_into().map_err(|_| bad())?))
+}
+
 fn print_validation(v: &SegValidation) {
     println!(
         "segmentation, {} held-out frames: mIoU {:.3}, background IoU {:.3}, pixel accuracy {:.3}, engine {:.2} ms/frame (median)",
@@ -98,15 +110,20 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         print_validation(&validate::validate(&mut engine, &set, args.val_frames)?);
         return Ok(());
     }
-    let arch = match &args.seg_size {
-        Some(s) => {
-            let (w, h) = parse_size(s)?;
+    let widths = args.seg_widths.as_deref().map(parse_widths).transpose()?;
+    let arch = match (&args.seg_size, widths) {
+        (None, None) => None,
+        (size, widths) => {
             let mut c = SegConfig::new(set.len());
-            (c.input_width, c.input_height) = (w, h);
-            c.validate().map_err(|m| anyhow::anyhow!("--seg-size: {m}"))?;
+            if let Some(s) = size {
+                (c.input_width, c.input_height) = parse_size(s)?;
+            }
+            if let Some((enc, dec)) = widths {
+                (c.enc, c.dec) = (enc, dec);
+            }
+            c.validate().map_err(|m| anyhow::anyhow!("--seg-size / --seg-widths: {m}"))?;
             Some(c)
         }
-        None => None,
     };
     let embed = is_pose_file(&args.out);
     if !embed && args.out.exists() && SegFile::read(&args.out).is_err() {
@@ -142,6 +159,7 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         offset_branch: args.seg_offset_branch,
         freeze_trunk: args.seg_freeze_trunk,
         contacts: args.seg_contacts,
+        widen: widths,
         device: args.device,
         ..SegTrainConfig::default()
     };
@@ -212,4 +230,18 @@ fn bench(set: &ObjectSet, weights: Option<&Path>) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn widths_parse_as_encoder_then_decoder() {
+        assert_eq!(parse_widths("24,48,96,96/48,24,24").unwrap(), ([24, 48, 96, 96], [48, 24, 24]));
+        for bad in ["24,48,96,96", "24,48,96/48,24,24", "24,48,96,96/48,24", "a,48,96,96/48,24,24"] {
+            let e = parse_widths(bad).unwrap_err().to_string();
+            assert!(e.contains("--seg-widths") && e.contains("E1,E2,E3,E4/D3,D2,D1"), "{bad}: {e}");
+        }
+    }
 }

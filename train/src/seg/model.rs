@@ -6,7 +6,7 @@
 use burn::module::{Module, Param};
 use burn::nn::PaddingConfig2d;
 use burn::nn::conv::{Conv2d, Conv2dConfig};
-use burn::prelude::{Device, Tensor};
+use burn::prelude::{Device, Tensor, TensorData};
 use burn::tensor::activation::relu;
 use burn::tensor::module::interpolate;
 use burn::tensor::ops::{InterpolateMode, InterpolateOptions};
@@ -113,6 +113,59 @@ impl SegNet {
         self
     }
 
+    /// The same function at larger widths `to` (Net2Net-style): each layer's
+    /// trained weights fill the leading block of its wider copy; the new
+    /// output channels keep their fresh initialisation, and every weight that
+    /// reads a new channel starts at zero, so the wider network computes
+    /// exactly what this one did and the new channels learn from there.
+    /// `to` must differ from `from` only in `enc` / `dec`, none narrower.
+    pub fn widened(&self, from: &SegConfig, to: &SegConfig, device: &Device) -> anyhow::Result<Self> {
+        let same = SegConfig { enc: from.enc, dec: from.dec, ..to.clone() };
+        if &same != from {
+            anyhow::bail!("widening changes only the channel widths: {from:?} -> {to:?}");
+        }
+        if to.enc.iter().zip(&from.enc).chain(to.dec.iter().zip(&from.dec)).any(|(t, f)| t < f) {
+            anyhow::bail!(
+                "widths {:?} / {:?} are narrower than the file's {:?} / {:?}",
+                to.enc,
+                to.dec,
+                from.enc,
+                from.dec
+            );
+        }
+        let mut wide = SegNet::new(to, device);
+        let ([c1, c2, c3, c4], [d3, d2, d1]) = (from.enc, from.dec);
+        let ([_, _, _, w4], [v3, v2, _]) = (to.enc, to.dec);
+        // Input channel runs `(old start, new start, length)`; a decoder layer
+        // reads `cat(up(previous), skip)`, so its skip channels move.
+        let single = |n: usize| vec![(0, 0, n)];
+        let cat = |up_old: usize, up_new: usize, skip: usize| vec![(0, 0, up_old), (up_old, up_new, skip)];
+        let pairs: [(&Conv2d, &mut Conv2d, Runs); 8] = [
+            (&self.e1, &mut wide.e1, single(fusepose_estimator::seg::config::INPUT_CHANNELS)),
+            (&self.e2, &mut wide.e2, single(c1)),
+            (&self.e3, &mut wide.e3, single(c2)),
+            (&self.e4, &mut wide.e4, single(c3)),
+            (&self.d3, &mut wide.d3, cat(c4, w4, c3)),
+            (&self.d2, &mut wide.d2, cat(d3, v3, c2)),
+            (&self.d1, &mut wide.d1, cat(d2, v2, c1)),
+            (&self.head, &mut wide.head, single(d1)),
+        ];
+        for (old, new, runs) in pairs {
+            copy_into(old, new, &runs, device);
+        }
+        for (old, new, runs) in [
+            (&self.o1, &mut wide.o1, cat(d2, v2, c1)),
+            (&self.offset, &mut wide.offset, single(d1)),
+            (&self.b1, &mut wide.b1, cat(d2, v2, c1)),
+            (&self.contact, &mut wide.contact, single(d1)),
+        ] {
+            if let (Some(old), Some(new)) = (old, new.as_mut()) {
+                copy_into(old, new, &runs, device);
+            }
+        }
+        Ok(wide)
+    }
+
     /// Stops gradient tracking for every layer but the offset branch and head,
     /// so a step on the offset loss alone neither changes nor records the
     /// trunk (an autodiff graph of layers no loss reaches is never freed).
@@ -171,6 +224,37 @@ impl SegNet {
     }
 }
 
+/// Input channel runs `(old start, new start, length)` of [`copy_into`].
+type Runs = Vec<(usize, usize, usize)>;
+
+/// Writes `old`'s weights into the leading output rows of `new`, input
+/// channels placed by `runs` (`(old start, new start, length)`); the inputs
+/// no run covers get weight 0 in those rows, the other rows stay as they were.
+fn copy_into(old: &Conv2d, new: &mut Conv2d, runs: &Runs, device: &Device) {
+    let [o_old, i_old, kh, kw] = old.weight.dims();
+    let [o_new, i_new, _, _] = new.weight.dims();
+    let k = kh * kw;
+    let src = old.weight.val().into_data().try_to_vec::<f32>().expect("f32 weights");
+    let mut dst = new.weight.val().into_data().try_to_vec::<f32>().expect("f32 weights");
+    for o in 0..o_old {
+        dst[o * i_new * k..(o + 1) * i_new * k].fill(0.0);
+        for &(from, to, n) in runs {
+            for i in 0..n {
+                let s = (o * i_old + from + i) * k;
+                let d = (o * i_new + to + i) * k;
+                dst[d..d + k].copy_from_slice(&src[s..s + k]);
+            }
+        }
+    }
+    new.weight = Param::from_tensor(Tensor::from_data(TensorData::new(dst, [o_new, i_new, kh, kw]), device));
+    if let (Some(ob), Some(nb)) = (&old.bias, &new.bias) {
+        let src = ob.val().into_data().try_to_vec::<f32>().expect("f32 bias");
+        let mut dst = nb.val().into_data().try_to_vec::<f32>().expect("f32 bias");
+        dst[..src.len()].copy_from_slice(&src);
+        new.bias = Some(Param::from_tensor(Tensor::from_data(TensorData::new(dst, [o_new]), device)));
+    }
+}
+
 /// The offset head starts at zero (every cell votes for itself), so a head
 /// added to a trained segmenter does not disturb its features with large
 /// random gradients at the start.
@@ -184,4 +268,53 @@ fn contact_head(c: &SegConfig, device: &Device) -> Conv2d {
     let mut head = Conv2dConfig::new([c.dec[2], 1], [1, 1]).with_initializer(burn::nn::Initializer::Zeros).init(device);
     head.bias = Some(Param::from_tensor(Tensor::<1>::full([1], -3.0, device)));
     head
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use burn::tensor::Distribution;
+
+    fn values(t: Tensor<4>) -> Vec<f32> {
+        t.into_data().try_to_vec::<f32>().expect("f32")
+    }
+
+    #[test]
+    fn a_widened_network_computes_what_it_was_widened_from() {
+        let device = Device::default();
+        let narrow = SegConfig { offset_branch: true, contacts: true, ..SegConfig::new(3) };
+        let wide = SegConfig { enc: [20, 40, 72, 80], dec: [40, 24, 20], ..narrow.clone() };
+        let net = SegNet::new(&narrow, &device);
+        let widened = net.widened(&narrow, &wide, &device).unwrap();
+        assert_eq!(widened.e1.weight.dims(), [20, 4, 3, 3]);
+        assert_eq!(widened.d3.weight.dims(), [40, 80 + 72, 3, 3]);
+        assert_eq!(widened.b1.as_ref().unwrap().weight.dims(), [20, 24 + 20, 3, 3]);
+        let x = Tensor::<4>::random([2, 4, 24, 32], Distribution::Uniform(-1.0, 1.0), &device);
+        let (a, b) = (net.forward_outputs(x.clone()), widened.forward_outputs(x));
+        for (u, v) in
+            [(a.logits, b.logits), (a.offsets.unwrap(), b.offsets.unwrap()), (a.contacts.unwrap(), b.contacts.unwrap())]
+        {
+            let (u, v) = (values(u), values(v));
+            assert_eq!(u.len(), v.len());
+            let worst = u.iter().zip(&v).map(|(p, q)| (p - q).abs()).fold(0.0f32, f32::max);
+            assert!(worst < 1e-4, "outputs differ by {worst}");
+        }
+        // The new channels are there: they compute something (fresh incoming
+        // weights), only their outgoing weights start at zero.
+        let e1 = values(widened.e1.weight.val());
+        assert!(e1[16 * 36..].iter().any(|&w| w != 0.0));
+        let e2 = values(widened.e2.weight.val());
+        assert!((0..32).all(|o| e2[o * 20 * 9 + 16 * 9..(o + 1) * 20 * 9].iter().all(|&w| w == 0.0)));
+    }
+
+    #[test]
+    fn widening_refuses_narrower_widths_and_other_changes() {
+        let device = Device::default();
+        let c = SegConfig::new(3);
+        let net = SegNet::new(&c, &device);
+        let narrower = SegConfig { enc: [8, 32, 64, 64], ..c.clone() };
+        assert!(net.widened(&c, &narrower, &device).unwrap_err().to_string().contains("narrower"));
+        let other = SegConfig { num_classes: 4, enc: [32, 32, 64, 64], ..c.clone() };
+        assert!(net.widened(&c, &other, &device).unwrap_err().to_string().contains("only the channel widths"));
+    }
 }

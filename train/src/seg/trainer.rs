@@ -85,6 +85,10 @@ pub struct SegTrainConfig {
     /// resumed file that lacks them, `b1` copied from `d1`). With
     /// `freeze_trunk` they learn alone, on the contact loss.
     pub contacts: bool,
+    /// Widths `(enc, dec)` a resumed segmenter is widened to before training
+    /// ([`SegNet::widened`]: the same function, new channels starting at zero
+    /// influence); `None` keeps the file's.
+    pub widen: Option<([usize; 4], [usize; 3])>,
     /// Weight of a contact cell against a cell without one in the contact loss.
     pub contact_positive_weight: f32,
     /// Largest lift of a small object region's cells in the cross-entropy
@@ -127,6 +131,7 @@ impl Default for SegTrainConfig {
             offset_branch: false,
             freeze_trunk: false,
             contacts: false,
+            widen: None,
             contact_positive_weight: 5.0,
             small_region_boost: 1.0,
             sampler: fusepose_scene::sampler::SamplerConfig::training(),
@@ -324,6 +329,13 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
             if cfg.contacts && !arch.contacts && trains {
                 arch.contacts = true;
                 net = net.with_contact_branch(&arch, &device);
+            }
+            if let Some((enc, dec)) = cfg.widen.filter(|&(e, d)| trains && (e, d) != (arch.enc, arch.dec)) {
+                let wide = SegConfig { enc, dec, ..arch.clone() };
+                wide.validate().map_err(|m| anyhow::anyhow!("architecture: {m}"))?;
+                net = net.widened(&arch, &wide, &device)?;
+                log.line(&format!("# widened from {:?} / {:?} to {enc:?} / {dec:?}", arch.enc, arch.dec));
+                arch = wide;
             }
             (net, arch, record)
         }
