@@ -391,6 +391,12 @@ pub struct Args {
     /// evaluates each and prints a row per cast.
     #[arg(long, value_delimiter = ',', default_value = "none", value_parser = cast_arg())]
     pub cast: Vec<Cast>,
+    /// Dim frames brightened by one gain in linear light before the networks
+    /// (`fusepose_estimator::exposure`, after any `--cast`): `off`, `on` or
+    /// KEY=VALUE,… over the defaults (target, quantile, max-gain); default
+    /// as the daemon's `estimator.auto_exposure`.
+    #[arg(long, default_value = "off")]
+    pub auto_exposure: ExposureArg,
 }
 
 /// `--cast`'s parser: the casts' names as clap's possible values (shown in `--help`).
@@ -483,10 +489,14 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
             .progress_chars("=> "),
     );
     bar.set_prefix(runners.iter().map(|r| r.name.clone()).collect::<Vec<_>>().join(","));
+    let mut auto_exposure = args.auto_exposure.0.map(fusepose_estimator::exposure::AutoExposure::new);
     for index in 0..frames {
         let mut frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
         let colour_cast = args.cast.first().copied().unwrap_or(Cast::None);
         colour_cast.apply(&mut frame.rgb, args.seed.wrapping_add(index as u64));
+        if let Some(ae) = auto_exposure.as_mut() {
+            ae.apply_in_place(&mut frame.rgb);
+        }
         if let Some(seg) = &mut net_masks {
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
         }
@@ -1517,6 +1527,18 @@ mod tests {
     #[test]
     fn compare_csv_names_get_the_estimator_suffix() {
         assert_eq!(suffixed(Path::new("out/res.csv"), "icp"), PathBuf::from("out/res_icp.csv"));
+    }
+}
+
+/// `--auto-exposure`: `off`, `on` or the stage's parameter string.
+#[derive(Clone, Copy, Debug)]
+pub struct ExposureArg(pub Option<fusepose_estimator::exposure::ExposureConfig>);
+
+impl std::str::FromStr for ExposureArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        fusepose_estimator::exposure::ExposureConfig::parse_setting(s).map(Self)
     }
 }
 

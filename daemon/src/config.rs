@@ -341,6 +341,10 @@ pub struct EstimatorConfig {
     /// defaults), `off`, or `KEY=VALUE,…` over the defaults (height, step,
     /// step-per-m, share, absorb, absorb-p, slack).
     pub seg_depth_regions: String,
+    /// Dim frames brightened by one gain in linear light before the networks
+    /// (`fusepose_estimator::exposure`): `off`, `on` (the measured defaults)
+    /// or `KEY=VALUE,…` over them (target, quantile, max-gain).
+    pub auto_exposure: String,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
     pub pin_cpus: Vec<usize>,
@@ -470,6 +474,7 @@ impl Default for EstimatorConfig {
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             seg_depth_regions: "on".to_owned(),
+            auto_exposure: "off".to_owned(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }
@@ -745,6 +750,13 @@ impl DaemonConfig {
                 "estimator.seg_depth_regions",
                 &e.seg_depth_regions,
                 "must be \"on\", \"off\" or KEY=VALUE,... (keys height, step, step-per-m, share, absorb, absorb-p, slack; numbers >= 0)",
+            ));
+        }
+        if fusepose_estimator::exposure::ExposureConfig::parse_setting(&e.auto_exposure).is_err() {
+            return Err(invalid(
+                "estimator.auto_exposure",
+                &e.auto_exposure,
+                "must be \"on\", \"off\" or KEY=VALUE,... (target in (0, 1] linear brightness, quantile in 0..=1, max-gain >= 1)",
             ));
         }
         if !["drop", "flag", "off"].contains(&e.verify.as_str()) {
@@ -1053,6 +1065,10 @@ mod tests {
         let err = DaemonConfig::parse("[estimator]\nseg_depth_regions = \"share=lots\"\n").unwrap_err().to_string();
         assert!(err.starts_with("estimator.seg_depth_regions") && err.contains("absorb-p"), "{err}");
         assert_eq!(DaemonConfig::default().estimator.seg_depth_regions, "on");
+        let err = DaemonConfig::parse("[estimator]\nauto_exposure = \"target=2\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.auto_exposure") && err.contains("target in (0, 1]"), "{err}");
+        let c = DaemonConfig::parse("[estimator]\nauto_exposure = \"max-gain=2\"\n").unwrap();
+        assert_eq!(c.estimator.auto_exposure, "max-gain=2");
         let c = DaemonConfig::parse("[estimator]\nseg_depth_regions = \"off\"\n").unwrap();
         assert_eq!(c.estimator.seg_depth_regions, "off");
         let c = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode-cells\"\n").unwrap();

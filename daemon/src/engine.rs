@@ -7,6 +7,7 @@ use std::sync::{Arc, Mutex};
 
 use fusepose_client::{STAGE_COUNT, Stage};
 use fusepose_estimator::alternates;
+use fusepose_estimator::exposure::{AutoExposure, ExposureConfig};
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
 use fusepose_estimator::recut::{Recut, RecutConfig};
@@ -77,6 +78,8 @@ pub struct EngineSpec {
     pub seg_voting: VotingMode,
     /// `estimator.seg_depth_regions` with the objects' diameters (`None` = off).
     pub seg_depth_regions: Option<(Vec<f32>, DepthRegionParams)>,
+    /// `estimator.auto_exposure`: dim frames brightened before the networks (`None` = off).
+    pub auto_exposure: Option<ExposureConfig>,
     /// The network's and segmenter's cost measured at start (network only).
     pub startup_cost: Option<crate::startup_cost::StartupCost>,
     /// The segmenter engine every camera of this spec uses (made by the first
@@ -254,6 +257,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             .map_err(|e| anyhow::anyhow!("estimator.seg_depth_regions: {e}"))?
             .map(|p| (fusepose_estimator::parts::extents(&objects, 1.0), p));
         spec.masks = config.masks;
+        spec.auto_exposure = ExposureConfig::parse_setting(&config.auto_exposure)
+            .map_err(|e| anyhow::anyhow!("estimator.auto_exposure: {e}"))?;
         if let (Some(seg), Some(cost)) = (&spec.segmenter, spec.startup_cost.as_mut()) {
             match crate::startup_cost::measure_segmenter(seg, spec.seg_boundary, spec.seg_depth_regions.as_ref()) {
                 Ok(ns) => cost.segment_ns = Some(ns),
@@ -296,6 +301,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
+            auto_exposure: None,
             startup_cost: None,
             shared_segmenter: Default::default(),
         })
@@ -323,6 +329,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             seg_boundary: Boundary::default(),
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
+            auto_exposure: None,
             startup_cost: None,
             shared_segmenter: Default::default(),
         }),
@@ -419,6 +426,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         seg_boundary: Boundary::default(),
         seg_voting: VotingMode::Off,
         seg_depth_regions: None,
+        auto_exposure: None,
         startup_cost,
         shared_segmenter: Default::default(),
     })
@@ -493,6 +501,8 @@ pub struct PoseEngine {
     remask: Option<(Remask, Box<dyn Estimator>)>,
     /// The second masks' time per estimate.
     remask_cost: EstimateCost,
+    /// `estimator.auto_exposure`: the brightened copy of a dim frame's colour.
+    auto_exposure: Option<AutoExposure>,
 }
 
 /// Moving average of a step's time per estimate it made (ns; 0 = not yet
@@ -735,6 +745,7 @@ impl PoseEngine {
             recut_cost: EstimateCost::default(),
             remask,
             remask_cost: EstimateCost::default(),
+            auto_exposure: spec.auto_exposure.map(AutoExposure::new),
         })
     }
 
@@ -773,11 +784,32 @@ impl PoseEngine {
             recut_cost: EstimateCost::default(),
             remask: None,
             remask_cost: EstimateCost::default(),
+            auto_exposure: None,
         })
     }
 
     /// Runs prepare + estimate on `frame`; poses are then in [`PoseEngine::poses`].
+    /// With `estimator.auto_exposure` the networks see a dim frame brightened
+    /// (its colour copied through one gain; the producer's frame untouched).
     pub fn run(&mut self, frame: &FrameView<'_>, seed: u64, times: &mut StageTimes) -> Result<(), EngineFailure> {
+        // Taken out for the frame (no allocation) so its copy can be borrowed beside `self`.
+        let mut exposure = self.auto_exposure.take().filter(|_| self.estimator.is_some());
+        let gained = match exposure.as_mut() {
+            // Only a frame that passes validation is metered (its planes have their sizes).
+            Some(ae) if frame.validate().is_ok() => ae.apply(frame),
+            _ => None,
+        };
+        let result = self.run_frame(gained.as_ref().unwrap_or(frame), seed, times);
+        self.auto_exposure = exposure;
+        result
+    }
+
+    /// Gain applied to the last frame by `estimator.auto_exposure` (1 = none or off).
+    pub fn exposure_gain(&self) -> f64 {
+        self.auto_exposure.as_ref().map_or(1.0, AutoExposure::last_gain)
+    }
+
+    fn run_frame(&mut self, frame: &FrameView<'_>, seed: u64, times: &mut StageTimes) -> Result<(), EngineFailure> {
         self.poses.clear();
         let (Some(estimator), Some(workspace)) = (self.estimator.as_mut(), self.workspace.as_mut()) else {
             return frame.validate().map_err(EngineFailure::Refused);
@@ -1140,5 +1172,35 @@ mod tests {
         assert!(resolve(&off).unwrap().remask.is_none());
         let unverified = EstimatorConfig { verify: "off".into(), ..shipped_config() };
         assert!(resolve(&unverified).unwrap().remask.is_none(), "no verdicts, nothing to replace");
+    }
+
+    #[test]
+    fn auto_exposure_brightens_only_dim_frames_and_is_off_by_default() {
+        assert!(resolve(&shipped_config()).unwrap().auto_exposure.is_none(), "off by default");
+        let on = EstimatorConfig { auto_exposure: "on".into(), ..shipped_config() };
+        let spec = resolve(&on).unwrap();
+        assert_eq!(spec.auto_exposure, Some(ExposureConfig::default()));
+        let mut engine = PoseEngine::new(&spec).unwrap();
+        let intrinsics = fusepose_scene::Intrinsics::YCB_VIDEO;
+        let pixels = (intrinsics.width * intrinsics.height) as usize;
+        let depth = vec![1.0f32; pixels];
+        let mut times = [0; STAGE_COUNT];
+        // A table at 1 m under a lit patch; at −1.2 EV its highlights fall below the target.
+        for (level, dim) in [(200u8, false), (90, true), (200, false)] {
+            let color: Vec<u8> = (0..pixels)
+                .flat_map(|p| if p % 640 < 400 { [level, level / 2, level / 3] } else { [20, 20, 20] })
+                .collect();
+            let frame = FrameView {
+                intrinsics,
+                color_format: fusepose_estimator::ColorFormat::Rgb8,
+                color: &color,
+                depth: fusepose_estimator::DepthPlane::F32(&depth),
+                labels: None,
+            };
+            engine.run(&frame, 1, &mut times).unwrap();
+            assert_eq!(engine.exposure_gain() > 1.0, dim, "level {level}: gain {}", engine.exposure_gain());
+        }
+        let bad = EstimatorConfig { auto_exposure: "target=0".into(), ..shipped_config() };
+        assert!(resolve(&bad).err().unwrap().to_string().starts_with("estimator.auto_exposure"));
     }
 }

@@ -14,6 +14,7 @@ pub mod contact_cut;
 pub mod cpu_pin;
 pub mod duplicates;
 pub mod explained;
+pub mod exposure;
 pub mod frame;
 pub mod icp;
 pub mod instances;

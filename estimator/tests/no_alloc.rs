@@ -373,3 +373,27 @@ fn second_masks_too_thin_to_estimate_leave_nothing_behind() {
     // The plane was left clear: the next frame's second mask is whole again.
     assert_eq!(frame_of(&part, 99, Some(false)).kept, 1, "after the thin frames");
 }
+
+#[test]
+fn auto_exposure_does_not_allocate_after_the_first_frame_of_a_size() {
+    use fusepose_estimator::exposure::{AutoExposure, ExposureConfig};
+    let l = l_block();
+    let bright = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [0.0, 0.0, 0.5]))]);
+    let mut dim = render(&[(1, &l, pose([0.0, 1.0, 0.0], 50.0, [0.02, 0.0, 0.6]))]);
+    for v in dim.color.iter_mut() {
+        *v /= 4;
+    }
+    let mut ae = AutoExposure::new(ExposureConfig::default());
+    // The first frame is bright: nothing to copy, but the buffer is sized.
+    assert!(ae.apply(&bright.view()).is_none());
+    let mut gained = false;
+    let n = allocations_in(|| gained = ae.apply(&dim.view()).is_some());
+    assert_eq!(n, 0, "the first dim frame copies into the buffer sized by the bright one");
+    assert!(gained && ae.last_gain() > 1.0, "the dim frame is brightened (gain {})", ae.last_gain());
+    for frame in [&dim, &bright, &dim] {
+        let n = allocations_in(|| {
+            let _ = ae.apply(&frame.view());
+        });
+        assert_eq!(n, 0);
+    }
+}
