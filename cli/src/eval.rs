@@ -355,6 +355,11 @@ pub struct Args {
     /// the next flag) or more below the support plane fail (above 1 = off).
     #[arg(long)]
     pub verify_max_below_support: Option<f32>,
+    /// Poses whose region covers less than this share of the object's largest
+    /// face (back-projected at the pose's depth) fail, as the daemon's
+    /// `estimator.verify_min_region_area_share` (0 = off).
+    #[arg(long)]
+    pub verify_min_area_share: Option<f32>,
     /// Metres below the support plane from which a surface sample counts as
     /// sunk, as `VerifyConfig::below_support_m` (default 0.03).
     #[arg(long)]
@@ -816,6 +821,7 @@ impl Runner {
                         trim_table_share: args.verify_trim_table_share.unwrap_or(d.trim_table_share),
                         max_below_support: args.verify_max_below_support.unwrap_or(d.max_below_support),
                         below_support_m: args.verify_below_support_depth.unwrap_or(d.below_support_m),
+                        min_region_area_share: args.verify_min_area_share.unwrap_or(d.min_region_area_share),
                         ..d
                     },
                 )
@@ -1131,7 +1137,7 @@ impl Runner {
                         !before.contains(&p.translation.into()) as u8
                     };
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} below {:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} pass {}",
+                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} below {:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} area {:.4} pass {}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -1152,6 +1158,7 @@ impl Runner {
                         v.depth_residual_m,
                         sprob,
                         p.confidence,
+                        v.region_area_share,
                         v.passed as u8
                     );
                 }

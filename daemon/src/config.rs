@@ -234,6 +234,10 @@ pub struct EstimatorConfig {
     /// 0.05 halves the wrong poses on path-traced images for 0.1-0.6 ADD(S)
     /// AUC (docs/BENCHMARKS.md, session 40).
     pub verify_max_below_support: f32,
+    /// A pose whose region covers less than this share of the object's
+    /// largest face (back-projected at the pose's depth) fails
+    /// (`VerifyConfig::min_region_area_share`). 0 = off.
+    pub verify_min_region_area_share: f32,
     /// With the built-in segmenter: a pose whose region the segmenter nowhere
     /// gave its class with at least this probability fails (the segmenter
     /// made the region up; `VerifyConfig::min_region_probability`). 0 = off.
@@ -452,6 +456,7 @@ impl Default for EstimatorConfig {
             verify_agreeing_mask_agreement: fusepose_estimator::verify::VerifyConfig::default().agreeing_mask_agreement,
             verify_trim_table_share: fusepose_estimator::verify::VerifyConfig::default().trim_table_share,
             verify_max_below_support: fusepose_estimator::verify::VerifyConfig::default().max_below_support,
+            verify_min_region_area_share: fusepose_estimator::verify::VerifyConfig::default().min_region_area_share,
             verify_min_region_probability: fusepose_estimator::verify::VerifyConfig::default().min_region_probability,
             verify_region_certainty_quantile: DEFAULT_REGION_CERTAINTY_QUANTILE,
             join_parts: 1.0,
@@ -807,6 +812,13 @@ impl DaemonConfig {
                 "must be a number >= 0 (a share of the model's surface; above 1 turns it off)",
             ));
         }
+        if !(0.0..=1.0).contains(&e.verify_min_region_area_share) {
+            return Err(invalid(
+                "estimator.verify_min_region_area_share",
+                e.verify_min_region_area_share,
+                "must be in 0..=1 (a share of the object's largest face; 0 turns it off)",
+            ));
+        }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
         }
@@ -910,6 +922,10 @@ mod tests {
         let default = DaemonConfig::default().estimator.verify_max_below_support;
         assert_eq!(default, fusepose_estimator::verify::VerifyConfig::default().max_below_support);
         assert!(default > 1.0, "off by default");
+        let area = DaemonConfig::parse("[estimator]\nverify_min_region_area_share = 0.02\n").unwrap();
+        assert_eq!(area.estimator.verify_min_region_area_share, 0.02);
+        let err = DaemonConfig::parse("[estimator]\nverify_min_region_area_share = 2\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.verify_min_region_area_share"), "{err}");
         let on = DaemonConfig::parse("[estimator]\nverify_max_below_support = 0.05\n").unwrap();
         assert_eq!(on.estimator.verify_max_below_support, 0.05);
         for bad in ["-0.1", "nan", "inf"] {

@@ -201,6 +201,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
                 min_region_probability: config.verify_min_region_probability,
                 trim_table_share: config.verify_trim_table_share,
                 max_below_support: config.verify_max_below_support,
+                min_region_area_share: config.verify_min_region_area_share,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
@@ -557,7 +558,12 @@ fn verify_poses(
     let segmenter = segmenter.filter(|_| verifier.config().min_region_probability > 0.0);
     for pose in poses.as_slice() {
         let v = fusepose_estimator::verify::verify_on_region(verifier, frame, ws, segmenter, pose).unwrap_or(
-            Verification { depth_residual_m: f32::NAN, region_probability: f32::NAN, ..Verification::default() },
+            Verification {
+                depth_residual_m: f32::NAN,
+                region_probability: f32::NAN,
+                region_area_share: f32::NAN,
+                ..Verification::default()
+            },
         );
         verdicts.push(v);
     }

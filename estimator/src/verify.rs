@@ -143,6 +143,13 @@ pub struct VerifyConfig {
     /// Metres below the plane from which a sample counts as sunk: beyond the
     /// plane's fit and the depth noise of a real object resting on it.
     pub below_support_m: f32,
+    /// Poses whose region covers less than this share of the object's largest
+    /// face fail ([`Verification::region_area_share`]): a region of a few
+    /// square centimetres cannot hold a pose, and the poses made up for such
+    /// specks (a mug on a fleck of a coffee can) pass every depth term on the
+    /// surface they lie on. Relative to the object, so a small part keeps its
+    /// small regions. 0 = off.
+    pub min_region_area_share: f32,
 }
 
 impl Default for VerifyConfig {
@@ -169,6 +176,7 @@ impl Default for VerifyConfig {
             trim_table_share: 0.5,
             max_below_support: 2.0,
             below_support_m: 0.03,
+            min_region_area_share: 0.0,
         }
     }
 }
@@ -210,6 +218,10 @@ pub struct Verification {
     /// [`VerifyConfig::below_support_m`] below the support plane
     /// ([`VerifyConfig::max_below_support`]); 0 without a plane.
     pub below_support: f32,
+    /// The region's area back-projected at the pose's depth (pixels × z² ÷
+    /// (fx · fy)) over the object's largest bounding-box face
+    /// ([`VerifyConfig::min_region_area_share`]); NaN when not judged.
+    pub region_area_share: f32,
     /// Samples judged (inliers + outliers).
     pub judged_cells: u32,
     /// Whether the pose passed every threshold of [`VerifyConfig`] (depth
@@ -243,6 +255,9 @@ pub struct Verifier {
     thin: Vec<bool>,
     /// Per class (id − 1): diameter, metres.
     diameters: Vec<f32>,
+    /// Per class (id − 1): area of the largest face of its samples' bounding
+    /// box (object frame), m².
+    faces: Vec<f32>,
     /// Per class (id − 1): farthest surface sample from the object's origin, metres.
     radii: Vec<f32>,
     /// A region's pixels off the table ([`VerifyConfig::trim_table_share`]);
@@ -270,6 +285,18 @@ pub fn thinnest_extent(samples: &[[f32; 3]]) -> f32 {
     hi - lo
 }
 
+/// Area of the largest face of the samples' axis-aligned bounding box (m²).
+fn largest_face(samples: &[[f32; 3]]) -> f32 {
+    let mut extent = [0.0f32; 3];
+    for (axis, e) in extent.iter_mut().enumerate() {
+        let (lo, hi) =
+            samples.iter().fold((f32::INFINITY, f32::NEG_INFINITY), |(lo, hi), p| (lo.min(p[axis]), hi.max(p[axis])));
+        *e = if hi > lo { hi - lo } else { 0.0 };
+    }
+    extent.sort_by(f32::total_cmp);
+    extent[1] * extent[2]
+}
+
 impl Verifier {
     pub fn new(objects: &ObjectSet, config: VerifyConfig) -> Self {
         let grid = config.grid.clamp(4, 128);
@@ -287,6 +314,7 @@ impl Verifier {
             residuals: Vec::with_capacity(max_samples),
             thin,
             diameters: objects.objects.iter().map(|o| o.diameter as f32).collect(),
+            faces: samples.iter().map(|s| largest_face(s)).collect(),
             radii: samples
                 .iter()
                 .map(|s| s.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).fold(0.0, f32::max))
@@ -309,6 +337,18 @@ impl Verifier {
         &self.config
     }
 
+    /// [`Verification::region_area_share`] of `pose`'s region in `frame`
+    /// (NaN for an unknown class or one without an extent).
+    pub fn region_area_share(&self, frame: &FrameView<'_>, pose: &ObjectPose) -> f32 {
+        let Some(&face) = (pose.class_id as usize).checked_sub(1).and_then(|c| self.faces.get(c)) else {
+            return f32::NAN;
+        };
+        let i = &frame.intrinsics;
+        let z = pose.translation.z;
+        let area = pose.mask_pixels as f64 * z * z / (i.fx * i.fy);
+        if face > 0.0 { (area / face as f64) as f32 } else { f32::NAN }
+    }
+
     /// Share of the pose's surface samples lying more than `depth_m` below
     /// `plane` (the surface the objects stand on): a solid object cannot
     /// stand inside the table. NaN for an unknown class.
@@ -326,7 +366,12 @@ impl Verifier {
 
     /// Checks `pose` against the frame's depth and the instance mask.
     pub fn verify(&mut self, frame: &FrameView<'_>, mask: MaskRef<'_>, pose: &ObjectPose) -> Verification {
-        let fail = Verification { depth_residual_m: f32::NAN, region_probability: f32::NAN, ..Verification::default() };
+        let fail = Verification {
+            depth_residual_m: f32::NAN,
+            region_probability: f32::NAN,
+            region_area_share: f32::NAN,
+            ..Verification::default()
+        };
         let Some(class) = (pose.class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
             return fail;
         };
@@ -486,6 +531,7 @@ impl Verifier {
             depth_continuity,
             mask_agreement,
             region_probability: f32::NAN,
+            region_area_share: f32::NAN,
             below_support,
             judged_cells: judged,
             passed: false,
@@ -661,6 +707,10 @@ pub fn verify_on_region(
         v.judge_region_probability(seg.region_probability(mask.ids, id, pose.class_id, pose.bbox), min);
     }
     if crate::alternates::fails_as_alternate(&ws.instances, pose, v.fit) {
+        v.passed = false;
+    }
+    v.region_area_share = verifier.region_area_share(frame, pose);
+    if v.region_area_share < verifier.config().min_region_area_share {
         v.passed = false;
     }
     Some(v)

@@ -704,3 +704,73 @@ fn a_pose_sunk_into_the_table_fails_on_the_support_plane() {
     }
     assert!(tried >= 3, "found a bare table patch in only {tried} scenes");
 }
+
+#[test]
+fn a_pose_made_up_for_a_speck_fails_on_its_area_and_real_regions_keep_theirs() {
+    use fusepose_estimator::verify::verify_on_region;
+    let set = builtin_objects();
+    let config = VerifyConfig { min_region_area_share: 0.02, ..VerifyConfig::default() };
+    let mut verifier = Verifier::new(&set, config);
+    let (mut specks, mut real) = (0, 0);
+    for seed in 0..6 {
+        let r = render(&set, 7_000 + seed);
+        let w = r.truth.intrinsics.width as usize;
+        let base = r.target.labels().to_vec();
+        for t in r.truth.objects.iter().filter(|t| t.visible_fraction >= 0.7) {
+            let pixels: Vec<usize> = (0..base.len()).filter(|&p| base[p] == t.class_id).collect();
+            let ghost = t.class_id % set.len() as u16 + 1;
+            if pixels.len() < 3000 || r.truth.objects.iter().any(|o| o.class_id == ghost) {
+                continue;
+            }
+            // A 10x10 speck in the middle of the object, labelled another class.
+            let mid = pixels[pixels.len() / 2];
+            let (u0, v0) = (mid % w, mid / w);
+            let mut labels = base.clone();
+            for v in v0..v0 + 10 {
+                for u in u0..u0 + 10 {
+                    if labels[v * w + u] == t.class_id {
+                        labels[v * w + u] = ghost;
+                    }
+                }
+            }
+            let frame = view(&r, &labels);
+            let mut ws = workspace(&set);
+            let n = ws.prepare(&frame, 1).unwrap();
+            let (Some(ti), Some(gi)) = (
+                (0..n).find(|&i| ws.instances[i].class_id == t.class_id),
+                (0..n).find(|&i| ws.instances[i].class_id == ghost),
+            ) else {
+                continue;
+            };
+            let z = t.pose.translation.z;
+            let made_up =
+                Pose::from_parts(back_project(&r, u0 + 5, v0 + 5, z).coords.into(), UnitQuaternion::identity());
+            let speck = pose_of(ghost, gi, &ws, &made_up);
+            let v = verify_on_region(&mut verifier, &frame, &ws, None, &speck).unwrap();
+            // The share is the region's area at the pose's depth over the object's largest face.
+            let k = r.truth.intrinsics;
+            let area = speck.mask_pixels as f64 * z * z / (k.fx * k.fy);
+            let samples = &set.objects[ghost as usize - 1].samples;
+            let mut extent: Vec<f64> = (0..3)
+                .map(|a| {
+                    let (lo, hi) = samples.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                        (lo.min(p[a] as f32 as f64), hi.max(p[a] as f32 as f64))
+                    });
+                    hi - lo
+                })
+                .collect();
+            extent.sort_by(f64::total_cmp);
+            let expected = area / (extent[1] * extent[2]);
+            assert!((v.region_area_share as f64 / expected - 1.0).abs() < 1e-3, "{v:?} against {expected}");
+            assert!(v.region_area_share < 0.02 && !v.passed, "a speck of {} px: {v:?}", speck.mask_pixels);
+            specks += 1;
+            // The object's own region (all but the speck) is far above the floor.
+            let own =
+                verify_on_region(&mut verifier, &frame, &ws, None, &pose_of(t.class_id, ti, &ws, &t.pose)).unwrap();
+            assert!(own.region_area_share > 0.1, "class {}: {own:?}", t.class_id);
+            real += own.passed as usize;
+        }
+    }
+    assert!(specks >= 5, "too few specks checked: {specks}");
+    assert!(real * 10 >= specks * 9, "real poses passed {real} of {specks}");
+}
