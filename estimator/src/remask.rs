@@ -14,6 +14,11 @@
 //! failed one when it passes. The region (the published mask) stays the
 //! segmenter's.
 //!
+//! A pose that failed on its region's area
+//! ([`crate::verify::VerifyConfig::min_region_area_share`]) gets none: it was
+//! made up for a speck, and its posed box would make a pose of whatever lies
+//! there.
+//!
 //! Optionally ([`RemaskConfig::max_confidence`], off by default: measured,
 //! not adopted, docs/BENCHMARKS.md session 34) passed poses the network
 //! doubted get a second mask too, and are replaced only by a pose it is
@@ -208,6 +213,9 @@ impl Remask {
         self.passed_regions.clear();
         self.candidates.clear();
         self.doubted.clear();
+        // A pose that failed on its region's area was made up for a speck: a
+        // mask from its posed box would make a pose of whatever lies there.
+        let min_area = verifier.config().min_region_area_share;
         for (i, (p, v)) in poses.as_slice().iter().zip(verdicts.iter()).enumerate() {
             let Some(id) = ws.component_id(p.instance_id as usize) else { continue };
             if v.passed {
@@ -215,8 +223,11 @@ impl Remask {
                 if p.confidence < self.config.max_confidence {
                     self.doubted.push(i);
                 }
-            } else if v.inlier_fraction >= self.config.min_inlier_fraction {
-                self.candidates.push(i);
+            } else {
+                let speck = v.region_area_share < min_area;
+                if v.inlier_fraction >= self.config.min_inlier_fraction && !speck {
+                    self.candidates.push(i);
+                }
             }
         }
         // Best fit first: the likeliest to be an object gets the contested pixels.

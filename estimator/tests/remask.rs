@@ -4,7 +4,8 @@
 //! that holds the object, and its estimate replaces the failed pose. A
 //! ghost region on the table gets no second mask; instance planes are the
 //! producer's and are left alone. A pose that passed but that the network
-//! doubted is replaced only by one it is surer of.
+//! doubted is replaced only by one it is surer of. A pose that failed on its
+//! region's area (a speck) gets no second mask.
 
 mod common;
 
@@ -172,4 +173,38 @@ fn a_doubted_pose_stays_when_the_network_is_no_surer_of_its_successor() {
 fn a_pose_the_network_is_sure_of_gets_no_second_mask() {
     let out = doubted(0.85, 0.99);
     assert_eq!(out.stats, RemaskStats::default(), "confidence 0.85 is above the 0.8 limit");
+}
+
+#[test]
+fn a_pose_failed_on_its_region_area_gets_no_second_mask() {
+    // The partial region of the first test, judged with an area floor it is
+    // under: a pose made up for a speck must not be rebuilt from its posed box.
+    let (frame, object_pixels) = left_part(painted(render(&[(1, &l_block(), truth())])));
+    let view = frame.view();
+    let objects = object_set(&[l_block()]);
+    let ws_config = WorkspaceConfig { num_classes: 1, ..Default::default() };
+    let mut ws = Workspace::new(ws_config).unwrap();
+    let mut poses = PoseSet::with_capacity(ws_config.max_instances);
+    let mut estimator = partial(truth(), object_pixels);
+    ws.prepare(&view, 7).unwrap();
+    estimator.estimate(&view, &mut ws, &mut poses).unwrap();
+    for floor in [0.0, 1.0] {
+        let mut verifier = Verifier::new(&objects, VerifyConfig { min_region_area_share: floor, ..Default::default() });
+        let mut verdicts: Vec<Verification> = poses
+            .as_slice()
+            .iter()
+            .map(|p| {
+                let mut v =
+                    verifier.verify(&view, ws.mask_ref(ws.component_id(p.instance_id as usize).unwrap(), p.bbox), p);
+                v.region_area_share = verifier.region_area_share(&view, p);
+                v
+            })
+            .collect();
+        assert!(verdicts[0].region_area_share < 1.0 && !verdicts[0].passed, "{:?}", verdicts[0]);
+        let mut remask = Remask::new(&objects, ws_config, RemaskConfig::DEFAULT).unwrap();
+        let mut out = poses.clone();
+        let stats = remask.run(&view, &ws, &mut out, &mut verdicts, &mut estimator, &mut verifier, None, 7).unwrap();
+        let expected = if floor == 0.0 { (1, 1) } else { (0, 0) };
+        assert_eq!((stats.tried, stats.kept), expected, "area floor {floor}: {stats:?}");
+    }
 }
