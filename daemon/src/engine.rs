@@ -800,11 +800,8 @@ impl PoseEngine {
     pub fn run(&mut self, frame: &FrameView<'_>, seed: u64, times: &mut StageTimes) -> Result<(), EngineFailure> {
         // Taken out for the frame (no allocation) so its copy can be borrowed beside `self`.
         let mut exposure = self.auto_exposure.take().filter(|_| self.estimator.is_some());
-        let gained = match exposure.as_mut() {
-            // Only a frame that passes validation is metered (its planes have their sizes).
-            Some(ae) if frame.validate().is_ok() => ae.apply(frame),
-            _ => None,
-        };
+        // A frame with planes of the wrong size is refused in `run_frame`, gained or not.
+        let gained = exposure.as_mut().and_then(|ae| ae.apply(frame));
         let result = self.run_frame(gained.as_ref().unwrap_or(frame), seed, times);
         self.auto_exposure = exposure;
         result
