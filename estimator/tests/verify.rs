@@ -62,6 +62,16 @@ fn pose_of(class_id: u16, instance: usize, ws: &Workspace, p: &Pose) -> ObjectPo
     }
 }
 
+/// The frame prepared, with the indices of its instances of classes `a` and `b`
+/// (None unless both are there).
+fn prepared_pair(set: &ObjectSet, frame: &FrameView<'_>, a: u16, b: u16) -> Option<(Workspace, usize, usize)> {
+    let mut ws = workspace(set);
+    let n = ws.prepare(frame, 1).unwrap();
+    let find = |class: u16| (0..n).find(|&i| ws.instances[i].class_id == class);
+    let (ai, bi) = (find(a)?, find(b)?);
+    Some((ws, ai, bi))
+}
+
 fn mask<'a>(ws: &'a Workspace, i: usize) -> MaskRef<'a> {
     ws.mask_ref(ws.component_id(i).unwrap(), ws.instances[i].bbox)
 }
@@ -444,14 +454,7 @@ fn a_pose_made_up_for_part_of_another_object_is_dropped() {
             let mut labels = base.clone();
             pixels.iter().filter(|&&p| p % w < cut).for_each(|&p| labels[p] = ghost);
             let frame = view(&r, &labels);
-            let mut ws = workspace(&set);
-            let n = ws.prepare(&frame, 1).unwrap();
-            let (Some(ti), Some(gi)) = (
-                (0..n).find(|&i| ws.instances[i].class_id == t.class_id),
-                (0..n).find(|&i| ws.instances[i].class_id == ghost),
-            ) else {
-                continue;
-            };
+            let Some((ws, ti, gi)) = prepared_pair(&set, &frame, t.class_id, ghost) else { continue };
             // The made-up object stands on the region: at its centre pixel's depth, upright.
             let b = ws.instances[gi].bbox;
             let (u, v) = ((b[0] as usize + b[2] as usize) / 2, (b[1] as usize + b[3] as usize) / 2);
@@ -734,14 +737,7 @@ fn a_pose_made_up_for_a_speck_fails_on_its_area_and_real_regions_keep_theirs() {
                 }
             }
             let frame = view(&r, &labels);
-            let mut ws = workspace(&set);
-            let n = ws.prepare(&frame, 1).unwrap();
-            let (Some(ti), Some(gi)) = (
-                (0..n).find(|&i| ws.instances[i].class_id == t.class_id),
-                (0..n).find(|&i| ws.instances[i].class_id == ghost),
-            ) else {
-                continue;
-            };
+            let Some((ws, ti, gi)) = prepared_pair(&set, &frame, t.class_id, ghost) else { continue };
             let z = t.pose.translation.z;
             let made_up =
                 Pose::from_parts(back_project(&r, u0 + 5, v0 + 5, z).coords.into(), UnitQuaternion::identity());
