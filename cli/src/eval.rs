@@ -44,6 +44,7 @@ use std::time::Instant;
 use anyhow::Context;
 use fusepose_estimator::alternates;
 use fusepose_estimator::net::{NetEstimator, NetOptions};
+use fusepose_estimator::pose_odds::PoseOdds;
 use fusepose_estimator::seg::SegEngine;
 use fusepose_estimator::verify::{Verifier, VerifyConfig};
 use fusepose_estimator::{
@@ -375,6 +376,18 @@ pub struct Args {
     /// records the certainty, else off.
     #[arg(long, value_name = "Q")]
     pub verify_region_quantile: Option<f32>,
+    /// Poses whose odds of being right (the weight file's fitted model,
+    /// `fusepose train --stage odds`) are below this fail, as the daemon's
+    /// `estimator.verify_min_odds` (0 = off, the default).
+    #[arg(long, value_name = "P")]
+    pub verify_min_odds: Option<f32>,
+    /// Write each verified pose's odds terms and whether it is right (wrong:
+    /// matched to no object, or 0.1 diameters ADD-S or more from every object
+    /// of its class; right: else within 2 cm ADD-S; others left out) to this file,
+    /// the samples of `fusepose train --stage odds`. Fit it on frames that
+    /// are neither tuning nor test frames.
+    #[arg(long, value_name = "CSV")]
+    pub odds_samples: Option<PathBuf>,
     /// Write the summary as JSON.
     #[arg(long)]
     pub json: Option<PathBuf>,
@@ -412,6 +425,11 @@ fn cast_arg() -> impl clap::builder::TypedValueParser<Value = Cast> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(path) = &args.odds_samples {
+        // Once for every seed and cast: each run appends its samples.
+        let header = fusepose_estimator::pose_odds::samples_header() + "\n";
+        std::fs::write(path, header).with_context(|| format!("--odds-samples {}", path.display()))?;
+    }
     variants::run_each(args, run_cast)
 }
 
@@ -448,10 +466,24 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     let cut_limits = fusepose_estimator::split::CutLimits::new(&objects, args.split_regions);
     // Read from the weight file once, for every runner on segmenter masks.
     let floor = if mask_sources.contains(&MaskSource::Net) { region_floor(&args)? } else { 0.0 };
+    let odds = if kinds.contains(&EstimatorKind::Net) { pose_odds(&args)? } else { None };
+    let samples = match &args.odds_samples {
+        None => None,
+        Some(path) => {
+            let file = std::fs::OpenOptions::new()
+                .append(true)
+                .open(path)
+                .with_context(|| format!("--odds-samples {}", path.display()))?;
+            Some(std::sync::Arc::new(std::sync::Mutex::new(std::io::BufWriter::new(file))))
+        }
+    };
     let mut runners = kinds
         .iter()
         .flat_map(|&k| mask_sources.iter().map(move |&m| (k, m)))
-        .map(|(k, m)| Runner::new(k, m, mask_sources.len() > 1, &objects, &solids, &cut_limits, floor, &args))
+        .map(|(k, m)| {
+            let odds = (odds.as_ref(), samples.as_ref());
+            Runner::new(k, m, mask_sources.len() > 1, &objects, &solids, &cut_limits, floor, odds, &args)
+        })
         .collect::<anyhow::Result<Vec<_>>>()?;
     let mut net_masks = match mask_sources.contains(&MaskSource::Net) {
         false => None,
@@ -643,6 +675,8 @@ struct Runner {
     remask_stats: fusepose_estimator::remask::RemaskStats,
     verify_drop: bool,
     verify_counts: [usize; 4],
+    /// `--odds-samples`: where each verified pose's terms and label go.
+    odds_samples: Option<SampleWriter>,
     verify_ms: Vec<f64>,
     min_confidence: f32,
     csv: Option<BopResultsWriter>,
@@ -679,6 +713,28 @@ fn region_floor(args: &Args) -> anyhow::Result<f32> {
     certainty.quantile(q).with_context(|| format!("--verify-region-quantile {q}: must be in 0.01..=0.5"))
 }
 
+/// The weight file's model of a pose's odds (none with verification off);
+/// an error when `--verify-min-odds` asks for it and the file has none.
+fn pose_odds(args: &Args) -> anyhow::Result<Option<PoseOdds>> {
+    if args.verify == "off" {
+        return Ok(None);
+    }
+    let weights = crate::weights::resolve_weights(args.weights.as_deref())?;
+    let odds = PoseOdds::read(&weights)?;
+    if odds.is_none() && args.verify_min_odds.is_some_and(|p| p > 0.0) {
+        anyhow::bail!(
+            "--verify-min-odds: {} records no pose odds model; fit one with `fusepose eval --odds-samples S.csv ...` on frames that are neither tuning nor test \
+             frames, then `fusepose train --stage odds --odds-samples S.csv --out {}`",
+            weights.display(),
+            weights.display()
+        );
+    }
+    Ok(odds)
+}
+
+/// `--odds-samples`: the file, its header written, shared by every runner.
+type SampleWriter = std::sync::Arc<std::sync::Mutex<std::io::BufWriter<std::fs::File>>>;
+
 impl Runner {
     /// `region_floor`: [`region_floor`]'s value, applied when `masks` is the segmenter's.
     #[allow(clippy::too_many_arguments)] // the run's shared parts, borrowed one by one
@@ -690,6 +746,7 @@ impl Runner {
         solids: &std::sync::Arc<fusepose_estimator::interpenetration::Solids>,
         cut_limits: &fusepose_estimator::split::CutLimits,
         region_floor: f32,
+        odds: (Option<&PoseOdds>, Option<&SampleWriter>),
         args: &Args,
     ) -> anyhow::Result<Self> {
         let name =
@@ -799,7 +856,7 @@ impl Runner {
             verifier: (args.verify != "off").then(|| {
                 let d = VerifyConfig::default();
                 let min_region = args.verify_min_region_probability.unwrap_or(d.min_region_probability);
-                Verifier::new(
+                let mut verifier = Verifier::new(
                     objects,
                     VerifyConfig {
                         min_fit: args.verify_min_fit.unwrap_or(d.min_fit),
@@ -822,10 +879,14 @@ impl Runner {
                         max_below_support: args.verify_max_below_support.unwrap_or(d.max_below_support),
                         below_support_m: args.verify_below_support_depth.unwrap_or(d.below_support_m),
                         min_region_area_share: args.verify_min_area_share.unwrap_or(d.min_region_area_share),
+                        min_odds: args.verify_min_odds.unwrap_or(d.min_odds),
                         ..d
                     },
-                )
+                );
+                verifier.set_odds(odds.0.cloned());
+                verifier
             }),
+            odds_samples: odds.1.cloned(),
             verify_drop: args.verify == "drop",
             scores: Vec::new(),
             separations: fusepose_estimator::duplicates::separations(objects, args.duplicates),
@@ -1012,7 +1073,8 @@ impl Runner {
         let min_region_probability = verifier.config().min_region_probability;
         let trace = std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some();
         // The segmenter's certainty is read only when judged or traced.
-        let mut seg = seg.filter(|_| min_region_probability > 0.0 || trace);
+        let samples = self.odds_samples.clone();
+        let mut seg = seg.filter(|_| min_region_probability > 0.0 || trace || verifier.has_odds());
         let seg_ref = seg.as_deref();
         let mut verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
             .poses
@@ -1099,6 +1161,9 @@ impl Runner {
         }
         let instances = &self.workspace.instances;
         self.alternates_kept += self.poses.as_slice().iter().filter(|p| alternates::is_alternate(instances, p)).count();
+        if let Some(out) = &samples {
+            write_odds_samples(out, frame, self.poses.as_slice(), &verdicts, metrics, &self.diameters);
+        }
         if trace {
             let pairs = match_estimates(&frame.gt, self.poses.as_slice());
             for (p, v) in self.poses.as_slice().iter().zip(&verdicts) {
@@ -1137,7 +1202,7 @@ impl Runner {
                         !before.contains(&p.translation.into()) as u8
                     };
                     eprintln!(
-                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} below {:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} area {:.4} pass {}",
+                        "VTRACE frame {}/{} class {} under {} copies {copies} px {} z {:.3} add_s {} near {near:.3} below {:.3} piece {piece} in {:.3} cov {:.3} beh {:.3} off {:.3} sup {:.3} cont {:.3} dcont {:.3} magree {:.3} fit {:.3} res {:.4} sprob {:.3} conf {:.3} area {:.4} odds {:.3} pass {}",
                         frame.scene_id,
                         frame.im_id,
                         p.class_id,
@@ -1159,6 +1224,7 @@ impl Runner {
                         sprob,
                         p.confidence,
                         v.region_area_share,
+                        v.odds,
                         v.passed as u8
                     );
                 }
@@ -1374,6 +1440,40 @@ fn nearest_error(gt: &[GtObject], p: &ObjectPose, metrics: &[ObjectMetric], diam
         .filter(|g| g.class_id == p.class_id)
         .map(|g| m.add_s(&pose_of(p), &g.pose) / d)
         .fold(f64::INFINITY, f64::min)
+}
+
+/// `--odds-samples`: one line per verified pose of the frame, labelled as
+/// [`fusepose_estimator::pose_odds`] says (wrong: matched to no object, or
+/// 0.1 diameters ADD-S or more from every object of its class; right: else
+/// within 2 cm ADD-S of its object; poses in between are left out).
+fn write_odds_samples(
+    out: &SampleWriter,
+    frame: &EvalFrame,
+    poses: &[ObjectPose],
+    verdicts: &[Option<fusepose_estimator::verify::Verification>],
+    metrics: &[ObjectMetric],
+    diameters: &[f64],
+) {
+    use std::io::Write;
+    let pairs = match_estimates(&frame.gt, poses);
+    let Ok(mut w) = out.lock() else { return };
+    for (p, v) in poses.iter().zip(verdicts) {
+        let Some(v) = v else { continue };
+        let matched = pairs.iter().find(|(_, e)| e.is_some_and(|e| std::ptr::eq(e, p)));
+        let add_s = matched
+            .and_then(|(gt, _)| metrics.get(gt.class_id as usize - 1).map(|m| m.errors(&pose_of(p), &gt.pose).add_s));
+        let right = match add_s {
+            None => false,
+            Some(_) if nearest_error(&frame.gt, p, metrics, diameters) >= 0.1 => false,
+            Some(a) if a < 0.02 => true,
+            Some(_) => continue,
+        };
+        let x = fusepose_estimator::pose_odds::features(v, p);
+        if let Err(e) = writeln!(w, "{}", fusepose_estimator::pose_odds::sample_line(&x, right)) {
+            tracing::warn!("--odds-samples: {e}");
+            return;
+        }
+    }
 }
 
 /// Pairs each ground-truth object with an estimate of its class, or `None`:

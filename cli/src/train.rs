@@ -34,6 +34,10 @@ pub enum StageArg {
     /// it in that file, for `estimator.verify_region_certainty_quantile`.
     /// `--stage all` does this itself.
     Calibrate,
+    /// Fits the model of a pose's odds of being right
+    /// (`estimator.verify_min_odds`) to `--odds-samples` (written by `fusepose
+    /// eval --odds-samples` with this file's networks) and stores it in `--out`.
+    Odds,
     /// Everything for a new object set within `--minutes`: pose net + refiner,
     /// segmenter, fine-tune on the segmenter's masks, acceptance report.
     All,
@@ -107,6 +111,13 @@ pub struct Args {
     /// Only validate the weight file given with --resume; no training.
     #[arg(long)]
     pub validate_only: bool,
+    /// `--stage odds`: sample files of `fusepose eval --odds-samples`.
+    #[arg(long, value_delimiter = ',', value_name = "CSV")]
+    pub odds_samples: Vec<PathBuf>,
+    /// `--stage odds`: terms the model leaves out (weight 0), e.g.
+    /// `region_probability,confidence`, which a colour cast moves.
+    #[arg(long, value_delimiter = ',', value_name = "TERM")]
+    pub odds_without: Vec<String>,
     /// Points sampled per instance, for a fresh run (default 256; a resumed file keeps its own).
     #[arg(long)]
     pub points: Option<usize>,
@@ -284,6 +295,43 @@ impl Args {
     }
 }
 
+/// `--stage odds`: fits [`PoseOdds`] to the sample files and stores it in `out`.
+fn fit_odds(samples: &[PathBuf], without: &[String], out: &Path) -> anyhow::Result<()> {
+    use fusepose_estimator::pose_odds::{FEATURES, PoseOdds, parse_samples};
+    let left_out = without
+        .iter()
+        .map(|t| {
+            FEATURES.iter().position(|f| f == t).with_context(|| {
+                format!("--odds-without {t:?}: not a term of the model (terms: {})", FEATURES.join(", "))
+            })
+        })
+        .collect::<anyhow::Result<Vec<usize>>>()?;
+    anyhow::ensure!(
+        !samples.is_empty(),
+        "--stage odds needs --odds-samples: files written by `fusepose eval --odds-samples` on frames that are \
+         neither tuning nor test frames"
+    );
+    let mut all = Vec::new();
+    for path in samples {
+        let text = std::fs::read_to_string(path).with_context(|| format!("--odds-samples {}", path.display()))?;
+        all.extend(parse_samples(&text, &path.display().to_string())?);
+    }
+    let names: Vec<String> = samples.iter().map(|p| p.display().to_string()).collect();
+    let model = PoseOdds::fit_without(&all, &left_out, &names.join(", "))?;
+    model.store(out)?;
+    println!(
+        "pose odds: fitted on {} samples ({} right) and stored in {}",
+        model.samples,
+        model.positives,
+        out.display()
+    );
+    for (name, w) in FEATURES.iter().zip(&model.weights) {
+        println!("  {name:20} {w:+.3}");
+    }
+    println!("  {:20} {:+.3}", "bias", model.bias);
+    Ok(())
+}
+
 /// The training scene sampler the flags ask for: `SamplerConfig::training()`
 /// with their randomisation level and depth sensor; with `--randomize off
 /// --depth-sensor basic --single-instances` exactly the scenes of runs before
@@ -328,6 +376,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.objects
         );
     }
+    if matches!(args.stage(), StageArg::Odds) {
+        return fit_odds(&args.odds_samples, &args.odds_without, &args.out);
+    }
     let set = training_objects(&args)?;
     let stage = match args.stage() {
         StageArg::Pose => Stage::Pose,
@@ -335,6 +386,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         StageArg::Both => Stage::Both,
         StageArg::Seg => return seg::run(set, &args),
         StageArg::Calibrate => return seg::calibrate_file(&set, &args, &args.out).map(|_| ()),
+        StageArg::Odds => unreachable!("handled above"),
         StageArg::All => return pipeline::run(&args),
     };
     if args.bench_engine {

@@ -238,6 +238,11 @@ pub struct EstimatorConfig {
     /// largest face (back-projected at the pose's depth) fails
     /// (`VerifyConfig::min_region_area_share`). 0 = off.
     pub verify_min_region_area_share: f32,
+    /// A pose whose odds of being right, by the weight file's fitted model
+    /// (`fusepose train --stage odds`; `fusepose_estimator::pose_odds`),
+    /// are below this fails (`VerifyConfig::min_odds`). 0 = off, the
+    /// default; a weight file without a model leaves it off (warned).
+    pub verify_min_odds: f32,
     /// With the built-in segmenter: a pose whose region the segmenter nowhere
     /// gave its class with at least this probability fails (the segmenter
     /// made the region up; `VerifyConfig::min_region_probability`). 0 = off.
@@ -457,6 +462,7 @@ impl Default for EstimatorConfig {
             verify_trim_table_share: fusepose_estimator::verify::VerifyConfig::default().trim_table_share,
             verify_max_below_support: fusepose_estimator::verify::VerifyConfig::default().max_below_support,
             verify_min_region_area_share: fusepose_estimator::verify::VerifyConfig::default().min_region_area_share,
+            verify_min_odds: fusepose_estimator::verify::VerifyConfig::default().min_odds,
             verify_min_region_probability: fusepose_estimator::verify::VerifyConfig::default().min_region_probability,
             verify_region_certainty_quantile: DEFAULT_REGION_CERTAINTY_QUANTILE,
             join_parts: 1.0,
@@ -819,6 +825,13 @@ impl DaemonConfig {
                 "must be in 0..=1 (a share of the object's largest face; 0 turns it off)",
             ));
         }
+        if !(0.0..1.0).contains(&e.verify_min_odds) {
+            return Err(invalid(
+                "estimator.verify_min_odds",
+                e.verify_min_odds,
+                "must be in 0..1 (a probability that the pose is right; 0 turns it off)",
+            ));
+        }
         if !(0.0..=1.0).contains(&e.min_confidence) {
             return Err(invalid("estimator.min_confidence", e.min_confidence, "must be in 0..=1"));
         }
@@ -922,6 +935,10 @@ mod tests {
         let default = DaemonConfig::default().estimator.verify_max_below_support;
         assert_eq!(default, fusepose_estimator::verify::VerifyConfig::default().max_below_support);
         assert!(default > 1.0, "off by default");
+        let odds = DaemonConfig::parse("[estimator]\nverify_min_odds = 0.3\n").unwrap();
+        assert_eq!(odds.estimator.verify_min_odds, 0.3);
+        let err = DaemonConfig::parse("[estimator]\nverify_min_odds = 1\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.verify_min_odds") && err.contains("probability"), "{err}");
         let area = DaemonConfig::parse("[estimator]\nverify_min_region_area_share = 0.02\n").unwrap();
         assert_eq!(area.estimator.verify_min_region_area_share, 0.02);
         let err = DaemonConfig::parse("[estimator]\nverify_min_region_area_share = 2\n").unwrap_err().to_string();

@@ -10,6 +10,7 @@ use fusepose_estimator::alternates;
 use fusepose_estimator::exposure::{AutoExposure, ExposureConfig};
 use fusepose_estimator::interpenetration::Solids;
 use fusepose_estimator::net::{NetEstimator, NetLoadError, NetOptions, WeightFile};
+use fusepose_estimator::pose_odds::PoseOdds;
 use fusepose_estimator::recut::{Recut, RecutConfig};
 use fusepose_estimator::remask::{Remask, RemaskConfig};
 use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine, SegError, SegFile, VotingMode};
@@ -42,6 +43,8 @@ pub struct EngineSpec {
     pub min_confidence: f32,
     /// Pose verification against the depth image (`estimator.verify*`); `None` = off.
     pub verify: Option<(Arc<ObjectSet>, VerifyConfig, bool)>,
+    /// The weight file's model of a pose's odds, where `estimator.verify_min_odds` asks for it.
+    pub pose_odds: Option<PoseOdds>,
     /// Per class (id − 1): regions of the class whose points lie within this
     /// many metres of each other are one instance (`estimator.join_parts`);
     /// empty = never join.
@@ -183,6 +186,31 @@ fn calibrated_floor(config: &EstimatorConfig, seg: &SegFile) -> f32 {
     }
 }
 
+/// The weight file's model of a pose's odds where `estimator.verify_min_odds`
+/// asks for one; None when off, or when the file records none (warned: the
+/// term stays off).
+fn pose_odds(config: &EstimatorConfig) -> anyhow::Result<Option<PoseOdds>> {
+    if config.verify_min_odds <= 0.0 {
+        return Ok(None);
+    }
+    let odds = PoseOdds::read(&config.weights)?;
+    match &odds {
+        Some(m) => tracing::info!(
+            min_odds = %config.verify_min_odds,
+            samples = m.samples,
+            "pose odds term: the weight file's fitted model of a pose's odds of being right"
+        ),
+        None => tracing::warn!(
+            weights = %config.weights.display(),
+            "estimator.verify_min_odds = {}, but the weight file records no pose odds model: the term stays off \
+             (fit one with `fusepose eval --odds-samples` and `fusepose train --stage odds --out {}`)",
+            config.verify_min_odds,
+            config.weights.display()
+        ),
+    }
+    Ok(odds)
+}
+
 /// Resolves `[estimator]`: loads objects, applies the net → ICP fallback, loads the segmenter.
 pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
     let mut spec = resolve_estimator(config)?;
@@ -202,9 +230,11 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
                 trim_table_share: config.verify_trim_table_share,
                 max_below_support: config.verify_max_below_support,
                 min_region_area_share: config.verify_min_region_area_share,
+                min_odds: config.verify_min_odds,
                 ..VerifyConfig::default()
             };
             spec.verify = Some((Arc::new(objects.clone()), cfg, config.verify == "drop"));
+            spec.pose_odds = pose_odds(config)?;
         }
         spec.part_extents = fusepose_estimator::parts::extents(&objects, config.join_parts);
         spec.support_floors = fusepose_estimator::support::class_floors(&objects, config.support_floor);
@@ -289,6 +319,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             masks: MaskSource::Labels,
             min_confidence: 0.0,
             verify: None,
+            pose_odds: None,
             part_extents: Vec::new(),
             support_floors: Vec::new(),
             cut_limits: CutLimits::default(),
@@ -317,6 +348,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             masks: MaskSource::Labels,
             min_confidence: 0.0,
             verify: None,
+            pose_odds: None,
             part_extents: Vec::new(),
             support_floors: Vec::new(),
             cut_limits: CutLimits::default(),
@@ -414,6 +446,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         masks: MaskSource::Labels,
         min_confidence: 0.0,
         verify: None,
+        pose_odds: None,
         part_extents: Vec::new(),
         support_floors: Vec::new(),
         cut_limits: CutLimits::default(),
@@ -554,8 +587,8 @@ fn verify_poses(
 ) {
     verdicts.clear();
     let (Some(verifier), Some(ws)) = (verifier, ws) else { return };
-    // The segmenter's certainty is read only where its floor judges it.
-    let segmenter = segmenter.filter(|_| verifier.config().min_region_probability > 0.0);
+    // The segmenter's certainty is read only where its floor or the odds judge it.
+    let segmenter = segmenter.filter(|_| verifier.config().min_region_probability > 0.0 || verifier.has_odds());
     for pose in poses.as_slice() {
         let v = fusepose_estimator::verify::verify_on_region(verifier, frame, ws, segmenter, pose).unwrap_or(
             Verification {
@@ -731,7 +764,11 @@ impl PoseEngine {
             labels: Vec::new(),
             ignore_deadlines: false,
             min_confidence: spec.min_confidence,
-            verifier: spec.verify.as_ref().map(|(objects, cfg, _)| Verifier::new(objects, *cfg)),
+            verifier: spec.verify.as_ref().map(|(objects, cfg, _)| {
+                let mut verifier = Verifier::new(objects, *cfg);
+                verifier.set_odds(spec.pose_odds.clone());
+                verifier
+            }),
             verify_drop: spec.verify.as_ref().is_some_and(|v| v.2),
             verdicts: Vec::with_capacity(2 * max_instances),
             separations: spec.separations.clone(),
@@ -1104,6 +1141,18 @@ mod tests {
         assert_eq!(resolve(&off).unwrap().verify.unwrap().1.min_region_probability, 0.0);
         file.certainty = None;
         assert_eq!(calibrated_floor(&config, &file), 0.0, "a file without a record leaves the term off");
+    }
+
+    #[test]
+    fn the_odds_term_reads_the_files_model_only_when_asked() {
+        assert!(resolve(&shipped_config()).unwrap().pose_odds.is_none(), "off by default: not even read");
+        let on = EstimatorConfig { verify_min_odds: 0.3, ..shipped_config() };
+        let spec = resolve(&on).unwrap();
+        assert!(spec.pose_odds.as_ref().is_some_and(|m| m.samples > 0), "the shipped file records a model");
+        assert_eq!(spec.verify.as_ref().unwrap().1.min_odds, 0.3);
+        // The engine's verifier holds it.
+        let engine = PoseEngine::new(&spec).unwrap();
+        assert!(engine.verifier.as_ref().is_some_and(Verifier::has_odds));
     }
 
     #[test]

@@ -21,6 +21,7 @@ pub mod instances;
 pub mod interpenetration;
 pub mod net;
 pub mod parts;
+pub mod pose_odds;
 pub mod poses;
 pub mod recut;
 pub mod remask;

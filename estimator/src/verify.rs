@@ -133,6 +133,10 @@ pub struct VerifyConfig {
     /// [`THIN_OBJECT_M`] are never judged so (they lie within the table's
     /// height band). Above 1 = off.
     pub trim_table_share: f32,
+    /// With a fitted model ([`Verifier::set_odds`]): poses whose odds of
+    /// being right ([`Verification::odds`], [`crate::pose_odds`]) are below
+    /// this fail. 0 = off; without a model it does nothing.
+    pub min_odds: f32,
     /// Poses with more than this share of their surface samples more than
     /// [`Self::below_support_m`] below the support plane
     /// ([`Verifier::set_support`]) fail: a solid object cannot stand inside
@@ -177,6 +181,7 @@ impl Default for VerifyConfig {
             max_below_support: 2.0,
             below_support_m: 0.03,
             min_region_area_share: 0.0,
+            min_odds: 0.0,
         }
     }
 }
@@ -222,6 +227,10 @@ pub struct Verification {
     /// (fx · fy)) over the object's largest bounding-box face
     /// ([`VerifyConfig::min_region_area_share`]); NaN when not judged.
     pub region_area_share: f32,
+    /// The fitted model's probability that the pose is right
+    /// ([`crate::pose_odds`], [`VerifyConfig::min_odds`]); NaN without a
+    /// model or outside [`verify_on_region`].
+    pub odds: f32,
     /// Samples judged (inliers + outliers).
     pub judged_cells: u32,
     /// Whether the pose passed every threshold of [`VerifyConfig`] (depth
@@ -265,6 +274,8 @@ pub struct Verifier {
     off_table: Vec<u32>,
     /// The frame's support plane ([`Verifier::set_support`]).
     support: Option<crate::support::SupportPlane>,
+    /// The weight file's model of a pose's odds ([`Verifier::set_odds`]).
+    odds: Option<Box<crate::pose_odds::PoseOdds>>,
 }
 
 /// Objects whose thinnest extent is below this (metres) step off a table by
@@ -322,7 +333,19 @@ impl Verifier {
             samples,
             off_table: Vec::new(),
             support: None,
+            odds: None,
         }
+    }
+
+    /// The model [`verify_on_region`] computes each pose's odds with (the
+    /// weight file's, [`crate::pose_odds::PoseOdds::read`]); None = no odds.
+    pub fn set_odds(&mut self, odds: Option<crate::pose_odds::PoseOdds>) {
+        self.odds = odds.map(Box::new);
+    }
+
+    /// Whether a model of the odds is set.
+    pub fn has_odds(&self) -> bool {
+        self.odds.is_some()
     }
 
     /// The plane the frame's objects stand on (`Workspace::support_plane`),
@@ -532,6 +555,7 @@ impl Verifier {
             mask_agreement,
             region_probability: f32::NAN,
             region_area_share: f32::NAN,
+            odds: f32::NAN,
             below_support,
             judged_cells: judged,
             passed: false,
@@ -712,6 +736,12 @@ pub fn verify_on_region(
     v.region_area_share = verifier.region_area_share(frame, pose);
     if v.region_area_share < verifier.config().min_region_area_share {
         v.passed = false;
+    }
+    if let Some(model) = verifier.odds.as_deref() {
+        v.odds = model.probability(&v, pose);
+        if v.odds < verifier.config.min_odds {
+            v.passed = false;
+        }
     }
     Some(v)
 }

@@ -8,7 +8,9 @@
 //! their own regions and not their neighbours', and a pose made up for part
 //! of another object is dropped as explained by that object's pose. The
 //! shipped segmenter is sure of real objects' classes somewhere in their
-//! regions, and of no class on a patch of bare table.
+//! regions, and of no class on a patch of bare table. A pose's odds come
+//! from its verdict's terms, the odds floor fails only what is below it,
+//! and the shipped odds model rates true poses above shifted ones.
 
 mod common;
 
@@ -769,4 +771,87 @@ fn a_pose_made_up_for_a_speck_fails_on_its_area_and_real_regions_keep_theirs() {
     }
     assert!(specks >= 5, "too few specks checked: {specks}");
     assert!(real * 10 >= specks * 9, "real poses passed {real} of {specks}");
+}
+
+/// The odds of a pose (`pose_odds`) are computed on every region's verdict
+/// once the verifier holds a model, from the verdict's own terms; the floor
+/// `min_odds` fails a pose below it and changes no other term, and without a
+/// model it does nothing.
+#[test]
+fn the_odds_floor_fails_poses_below_it_and_only_with_a_model() {
+    use fusepose_estimator::pose_odds::{FEATURE_COUNT, FEATURES, PoseOdds};
+    use fusepose_estimator::verify::verify_on_region;
+    let set = builtin_objects();
+    // p = 0.5 everywhere, then a model that reads the fit alone.
+    let flat = PoseOdds {
+        features: FEATURES.iter().map(|s| s.to_string()).collect(),
+        mean: vec![0.0; FEATURE_COUNT],
+        scale: vec![1.0; FEATURE_COUNT],
+        weights: vec![0.0; FEATURE_COUNT],
+        bias: 0.0,
+        samples: 0,
+        positives: 0,
+        source: "test".into(),
+    };
+    let fit_index = FEATURES.iter().position(|&f| f == "fit").unwrap();
+    let mut by_fit = PoseOdds { mean: vec![0.5; FEATURE_COUNT], scale: vec![0.1; FEATURE_COUNT], ..flat.clone() };
+    by_fit.weights[fit_index] = 1.0;
+    let (mut checked, mut higher) = (0, 0);
+    for_each_clear_object(&set, |frame, ws, i, class, truth| {
+        let pose = pose_of(class, i, ws, truth);
+        let mut plain = Verifier::new(&set, VerifyConfig { min_odds: 0.9, ..VerifyConfig::default() });
+        let base = verify_on_region(&mut plain, frame, ws, None, &pose).unwrap();
+        assert!(base.odds.is_nan(), "no model, no odds: {base:?}");
+        if !base.passed {
+            return;
+        }
+        checked += 1;
+        for (floor, passes) in [(0.4, true), (0.6, false)] {
+            let mut v = Verifier::new(&set, VerifyConfig { min_odds: floor, ..VerifyConfig::default() });
+            v.set_odds(Some(flat.clone()));
+            let judged = verify_on_region(&mut v, frame, ws, None, &pose).unwrap();
+            assert!((judged.odds - 0.5).abs() < 1e-6 && judged.passed == passes, "floor {floor}: {judged:?}");
+            assert_eq!(judged.fit, base.fit);
+            assert_eq!(judged.inlier_fraction, base.inlier_fraction);
+        }
+        // The terms reach the model: a pose shifted by 3 cm fits worse, so its odds are lower.
+        let mut v = Verifier::new(&set, VerifyConfig::default());
+        v.set_odds(Some(by_fit.clone()));
+        let true_odds = verify_on_region(&mut v, frame, ws, None, &pose).unwrap();
+        let mut moved = *truth;
+        moved.translation.vector += Vector3::new(0.03, 0.0, 0.0);
+        let moved_odds = verify_on_region(&mut v, frame, ws, None, &pose_of(class, i, ws, &moved)).unwrap();
+        let expected = 1.0 / (1.0 + (-(true_odds.fit - 0.5) / 0.1).exp());
+        assert!((true_odds.odds - expected).abs() < 1e-4, "{true_odds:?}");
+        higher += usize::from(true_odds.odds > moved_odds.odds);
+    });
+    assert!(checked >= 10, "too few passing true poses: {checked}");
+    assert_eq!(higher, checked, "true poses' odds above their shifted copies'");
+}
+
+/// The shipped weight file's odds model (fitted on own renders, off by
+/// default: docs/BENCHMARKS.md, session 43) reads, rates true poses of
+/// rendered scenes as likely right, and each above its copy shifted by 3 cm.
+#[test]
+fn the_shipped_odds_model_rates_true_poses_above_shifted_ones() {
+    use fusepose_estimator::pose_odds::PoseOdds;
+    use fusepose_estimator::verify::verify_on_region;
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/builtin.safetensors");
+    let model = PoseOdds::read(&path).unwrap().expect("the shipped file records a pose odds model");
+    let set = builtin_objects();
+    let mut verifier = Verifier::new(&set, VerifyConfig::default());
+    verifier.set_odds(Some(model));
+    let (mut checked, mut likely, mut above) = (0, 0, 0);
+    for_each_clear_object(&set, |frame, ws, i, class, truth| {
+        let good = verify_on_region(&mut verifier, frame, ws, None, &pose_of(class, i, ws, truth)).unwrap();
+        let mut moved = *truth;
+        moved.translation.vector += Vector3::new(0.0, 0.03, 0.0);
+        let bad = verify_on_region(&mut verifier, frame, ws, None, &pose_of(class, i, ws, &moved)).unwrap();
+        checked += 1;
+        likely += usize::from(good.odds >= 0.5);
+        above += usize::from(good.odds > bad.odds);
+    });
+    assert!(checked >= 12, "too few objects checked: {checked}");
+    assert!(likely as f64 >= 0.9 * checked as f64, "true poses rated likely right: {likely} of {checked}");
+    assert!(above as f64 >= 0.9 * checked as f64, "true above shifted: {above} of {checked}");
 }
