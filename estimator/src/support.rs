@@ -4,7 +4,10 @@
 //! Objects on a table (or a bin's floor) stand above it; a point lying on it
 //! is table, whatever a mask says. [`fit`] is RANSAC with a fixed generator
 //! state (the same points, the same plane) over points the caller already
-//! knows to be background, so an object's large flat face cannot win.
+//! knows to be background, so an object's large flat face cannot win. The
+//! objects stand on the plane, so a plane with many of their points under it
+//! ([`share_below`]) is refused: the background the segmenter left can be a
+//! few shadows and gaps when it gave the table an object's class.
 
 use fusepose_scene::ObjectSet;
 use nalgebra::Vector3;
@@ -53,6 +56,25 @@ impl SupportPlane {
     }
 }
 
+/// A point lies below a plane when it is more than this far under it (metres
+/// plus this share of its depth): depth noise and flying pixels at the
+/// objects' feet stay within it.
+const BELOW_M: f32 = 0.02;
+const BELOW_PER_M: f32 = 0.01;
+
+/// A plane with more than this share of the frame's object points below it
+/// is not what they stand on: the background the segmenter left (a green
+/// table taken for the green bowl leaves shadows and gaps) held a slope
+/// through them, and every object "sank" under it (docs/BENCHMARKS.md,
+/// session 43).
+pub const MAX_BELOW_SHARE: f32 = 0.15;
+
+/// Share of `points` lying below `plane` ([`BELOW_M`]); 0 for none.
+pub fn share_below(plane: &SupportPlane, points: &[Vector3<f32>]) -> f32 {
+    let below = points.iter().filter(|p| plane.height(p) < -(BELOW_M + BELOW_PER_M * p.z)).count();
+    below as f32 / points.len().max(1) as f32
+}
+
 /// The plane through most of `points` (camera frame, metres, all with depth),
 /// or `None` when fewer than [`MIN_SHARE`] of them lie on any one tried.
 pub fn fit(points: &[Vector3<f32>]) -> Option<SupportPlane> {
@@ -96,6 +118,17 @@ pub fn fit(points: &[Vector3<f32>]) -> Option<SupportPlane> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn share_below_counts_points_under_the_plane_beyond_the_noise() {
+        // The plane z = 1 m seen from above: height = 1 - z.
+        let plane = SupportPlane { normal: Vector3::new(0.0, 0.0, -1.0), offset: 1.0 };
+        let at = |z: f32| Vector3::new(0.0, 0.0, z);
+        // 2 cm + 1 % of the depth under it is noise; 5 cm is below.
+        let points = [at(0.9), at(1.0), at(1.025), at(1.05), at(1.05)];
+        assert_eq!(share_below(&plane, &points), 0.4);
+        assert_eq!(share_below(&plane, &[]), 0.0);
+    }
 
     /// A table 1 m below a camera tilted 30° down, with 30 % of the points on a box 10 cm above it.
     fn table_and_box() -> Vec<Vector3<f32>> {

@@ -616,7 +616,11 @@ impl Workspace {
     }
 
     /// Fits the support plane of this frame to its background pixels (see
-    /// [`WorkspaceConfig::support_floor_m`]).
+    /// [`WorkspaceConfig::support_floor_m`]). A plane with more than
+    /// [`support::MAX_BELOW_SHARE`] of the objects' points under it is not
+    /// the one they stand on: the frame then has none. (Fitting again to
+    /// every pixel would find the table a segmenter gave a class, but also
+    /// a box's top where no table is in view.)
     fn fit_support(&mut self, frame: &FrameView<'_>, labels: &LabelPlane<'_>) {
         self.support = None;
         if self.config.support_floor_m <= 0.0 {
@@ -626,17 +630,26 @@ impl Workspace {
         // Sized on the first frame of a size; a no-op after.
         self.support_points.clear();
         self.support_points.reserve(w.div_ceil(SUPPORT_STRIDE) * h.div_ceil(SUPPORT_STRIDE));
-        for v in (SUPPORT_STRIDE / 2..h).step_by(SUPPORT_STRIDE) {
-            for u in (SUPPORT_STRIDE / 2..w).step_by(SUPPORT_STRIDE) {
-                let p = v * w + u;
-                if labels.class_at(p) == 0
-                    && let Some(z) = frame.depth.metres(p)
-                {
-                    self.support_points.push(sampling::back_project(frame, u, v, z).into());
+        // The background's points first, then the objects': they stand on the plane, not under it.
+        let mut background = 0;
+        for on_background in [true, false] {
+            for v in (SUPPORT_STRIDE / 2..h).step_by(SUPPORT_STRIDE) {
+                for u in (SUPPORT_STRIDE / 2..w).step_by(SUPPORT_STRIDE) {
+                    let p = v * w + u;
+                    if (labels.class_at(p) == 0) == on_background
+                        && let Some(z) = frame.depth.metres(p)
+                    {
+                        self.support_points.push(sampling::back_project(frame, u, v, z).into());
+                    }
                 }
             }
+            if on_background {
+                background = self.support_points.len();
+            }
         }
-        self.support = support::fit(&self.support_points);
+        let (bg, objects) = self.support_points.split_at(background);
+        self.support =
+            support::fit(bg).filter(|plane| support::share_below(plane, objects) <= support::MAX_BELOW_SHARE);
     }
 
     fn prepare_instance(&mut self, frame: &FrameView<'_>, component: Component, rng: &mut Pcg64Mcg) {

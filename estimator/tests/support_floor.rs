@@ -1,7 +1,9 @@
 //! The support floor (`WorkspaceConfig::support_floor_m`): pixels of a mask
 //! lying on the plane the objects stand on are not the object's points.
 //! A box on a tilted table; its mask bleeds onto the table around it, and a
-//! second region (a shadow taken for an object) lies on the table only.
+//! second region (a shadow taken for an object) lies on the table only. A
+//! table given an object's class leaves the box's top as the background: a
+//! plane the objects lie under is no support.
 
 mod common;
 
@@ -157,4 +159,34 @@ fn a_part_thinner_than_four_floors_keeps_its_points() {
     // The floor is still capped by the configuration: 0 turns it off for every class.
     let off = prepare_with(0.0, &floors, &depth);
     assert_eq!(off.instances.len(), 2);
+}
+
+#[test]
+fn a_plane_the_objects_stand_under_is_refused() {
+    // The segmenter gave the table a class (the green bowl on a green table)
+    // and left only the box's top as background: that top is a plane 6 cm
+    // above the table, with the whole table under it. It is not the support:
+    // the frame gets none, and no region loses its points to it.
+    let depth = depth(true);
+    let labels: Vec<u8> = (0..W * H).map(|p| if on_box(p % W, p / W) { 0 } else { 2 }).collect();
+    let color = vec![90u8; W * H * 3];
+    let frame = FrameView {
+        intrinsics: intrinsics(),
+        color_format: ColorFormat::Rgb8,
+        color: &color,
+        depth: DepthPlane::U16 { data: &depth, scale: 0.0001 },
+        labels: Some(LabelPlane::U8(&labels)),
+    };
+    let prepared = |floor: f32| {
+        let config = WorkspaceConfig { num_classes: 2, num_points: 256, support_floor_m: floor, ..Default::default() };
+        let mut ws = Workspace::new(config).unwrap();
+        ws.prepare(&frame, 3).unwrap();
+        ws
+    };
+    let (on, off) = (prepared(0.004), prepared(0.0));
+    assert_eq!(on.support_plane(), None);
+    assert_eq!(on.instances, off.instances);
+    assert_eq!(on.points, off.points);
+    // With the table's own pixels as background the table is found.
+    assert!(prepare(0.004, &depth).support_plane().is_some());
 }
