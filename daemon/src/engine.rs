@@ -595,6 +595,7 @@ fn verify_poses(
                 depth_residual_m: f32::NAN,
                 region_probability: f32::NAN,
                 region_area_share: f32::NAN,
+                odds: f32::NAN,
                 ..Verification::default()
             },
         );

@@ -393,6 +393,7 @@ impl Verifier {
             depth_residual_m: f32::NAN,
             region_probability: f32::NAN,
             region_area_share: f32::NAN,
+            odds: f32::NAN,
             ..Verification::default()
         };
         let Some(class) = (pose.class_id as usize).checked_sub(1).filter(|&i| i < self.samples.len()) else {
