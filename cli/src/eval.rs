@@ -1073,7 +1073,6 @@ impl Runner {
         let min_region_probability = verifier.config().min_region_probability;
         let trace = std::env::var_os("FUSEPOSE_VERIFY_TRACE").is_some();
         // The segmenter's certainty is read only when judged or traced.
-        let samples = self.odds_samples.clone();
         let mut seg = seg.filter(|_| min_region_probability > 0.0 || trace || verifier.has_odds());
         let seg_ref = seg.as_deref();
         let mut verdicts: Vec<Option<fusepose_estimator::verify::Verification>> = self
@@ -1161,7 +1160,7 @@ impl Runner {
         }
         let instances = &self.workspace.instances;
         self.alternates_kept += self.poses.as_slice().iter().filter(|p| alternates::is_alternate(instances, p)).count();
-        if let Some(out) = &samples {
+        if let Some(out) = &self.odds_samples {
             write_odds_samples(out, frame, self.poses.as_slice(), &verdicts, metrics, &self.diameters);
         }
         if trace {
