@@ -259,10 +259,11 @@ pub struct Args {
     pub recut_separation: f32,
     /// `--recut`: where a region's cut comes from: `points` (k-means on its
     /// 3D points), `votes` (the segmenter's centre-offset votes where its
-    /// file has the head and they point at two centres, else the points),
-    /// `votes-only`, or `contacts` (the segmenter's contact band where its
+    /// file has the head and they point at two centres, else as `creases`),
+    /// `votes-only`, `contacts` (the segmenter's contact band where its
     /// file has the branch and the band parts the region, else the points),
-    /// as the daemon's `estimator.recut_proposal`.
+    /// or `creases` (as `contacts`, the band from the depth image's concave
+    /// folds and steps), as the daemon's `estimator.recut_proposal`.
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.proposal)]
     pub recut_proposal: fusepose_estimator::recut::CutProposal,
     /// `--recut`: most pieces a region is cut into (2 to 6): a region whose

@@ -291,7 +291,9 @@ pub struct EstimatorConfig {
     pub recut: f32,
     /// `recut`: where the cut comes from: `votes` (the segmenter's
     /// centre-offset votes where its file has the head and they point at two
-    /// centres, else the region's 3D points), `votes-only`, `contacts` (the
+    /// centres, else as `creases`), `creases` (concave folds and steps of the
+    /// depth image where they part the region, `fusepose_estimator::creases`,
+    /// else the region's 3D points), `votes-only`, `contacts` (the
     /// segmenter's contact band where its file has the branch) or `points`
     /// (`fusepose_estimator::recut::CutProposal`).
     pub recut_proposal: String,

@@ -14,7 +14,9 @@
 //! the band rather than halfway between the centres.
 //!
 //! Buffers are sized per frame size ([`ContactCut::resize`]); a cut
-//! allocates nothing.
+//! allocates nothing. A cut may run on cells of `scale` × `scale` pixels
+//! ([`ContactCut::resize_scaled`]; each cell read at its top-left pixel), a
+//! quarter of the work at scale 2 for a band several pixels wide.
 
 /// Where two object instances touch: the probability per frame pixel, or
 /// `None` where unknown ([`crate::seg::SegEngine::contact_at`]).
@@ -41,7 +43,7 @@ const MAX_PARTS: usize = 1024;
 /// The cut's buffers and its last result.
 #[derive(Default)]
 pub struct ContactCut {
-    /// Per frame pixel (within the cut region's box): part id during the
+    /// Per cell (within the cut region's box): part id during the
     /// cut, then piece + 1 (0 = not in the region).
     label: Vec<u16>,
     queue: Vec<u32>,
@@ -49,19 +51,31 @@ pub struct ContactCut {
     sizes: Vec<u32>,
     /// Piece + 1 of each part, 0 for parts not kept.
     piece_of_part: Vec<u16>,
+    /// Cells per row.
     width: usize,
+    /// Pixels per cell side (0 or 1: a cell is a pixel).
+    scale: usize,
+    /// Pixels per frame row.
+    frame_width: usize,
 }
 
 impl ContactCut {
     /// Sizes the buffers for frames of `width` × `height` (allocates only
     /// when the size changes).
     pub fn resize(&mut self, width: usize, height: usize) {
-        let n = width * height;
+        self.resize_scaled(width, height, 1);
+    }
+
+    /// As [`ContactCut::resize`], cutting on cells of `scale` × `scale` pixels.
+    pub fn resize_scaled(&mut self, width: usize, height: usize, scale: usize) {
+        let scale = scale.max(1);
+        let (cols, rows) = (width.div_ceil(scale), height.div_ceil(scale));
+        let n = cols * rows;
         if self.label.len() != n {
             self.label = vec![0; n];
             self.queue = Vec::with_capacity(n);
         }
-        self.width = width;
+        (self.width, self.scale, self.frame_width) = (cols, scale, width);
         if self.sizes.capacity() < MAX_PARTS {
             self.sizes = Vec::with_capacity(MAX_PARTS);
             self.piece_of_part = Vec::with_capacity(MAX_PARTS);
@@ -82,8 +96,11 @@ impl ContactCut {
         contacts: &dyn ContactMap,
         most: usize,
     ) -> Option<usize> {
-        let w = self.width;
-        let [u0, v0, u1, v1] = bbox;
+        let (w, s, fw) = (self.width, self.scale.max(1), self.frame_width);
+        let in_region = |c: usize| in_region((c / w) * s * fw + (c % w) * s);
+        let contact_at = |u: usize, v: usize| contacts.contact_at(u * s, v * s);
+        let [u0, v0, u1, v1] = bbox.map(|x| x / s);
+        let bbox = [u0, v0, u1, v1];
         if w == 0 || u1 >= w || (v1 + 1) * w > self.label.len() || u0 > u1 || v0 > v1 {
             return None;
         }
@@ -96,10 +113,7 @@ impl ContactCut {
         // Parts off the band: 4-connected flood fills.
         self.sizes.clear();
         for (u, v, p) in pixels() {
-            if self.label[p] != 0
-                || !in_region(p)
-                || !contacts.contact_at(u, v).is_some_and(|c| c < CONTACT_PROBABILITY)
-            {
+            if self.label[p] != 0 || !in_region(p) || !contact_at(u, v).is_some_and(|c| c < CONTACT_PROBABILITY) {
                 continue;
             }
             if self.sizes.len() == MAX_PARTS {
@@ -115,9 +129,7 @@ impl ContactCut {
                 let (qu, qv) = (q as usize % w, q as usize / w);
                 for (nu, nv) in neighbours(qu, qv, bbox) {
                     let n = nv * w + nu;
-                    if self.label[n] == 0
-                        && in_region(n)
-                        && contacts.contact_at(nu, nv).is_some_and(|c| c < CONTACT_PROBABILITY)
+                    if self.label[n] == 0 && in_region(n) && contact_at(nu, nv).is_some_and(|c| c < CONTACT_PROBABILITY)
                     {
                         self.label[n] = id;
                         self.queue.push(n as u32);
@@ -151,7 +163,7 @@ impl ContactCut {
                 self.queue.push(p as u32);
             }
         }
-        self.flood(bbox, &in_region);
+        self.flood(bbox, in_region);
         // Region pixels no path reaches (the region is not connected within
         // its box) join the first piece: they are too few to change a pose.
         for (_, _, p) in pixels() {
@@ -177,8 +189,10 @@ impl ContactCut {
         contacts: &dyn ContactMap,
         seeds: impl Iterator<Item = (usize, u16)>,
     ) {
-        let w = self.width;
-        let [u0, v0, u1, v1] = bbox;
+        let (w, s, fw) = (self.width, self.scale.max(1), self.frame_width);
+        let in_region = |c: usize| in_region((c / w) * s * fw + (c % w) * s);
+        let [u0, v0, u1, v1] = bbox.map(|x| x / s);
+        let bbox = [u0, v0, u1, v1];
         if w == 0 || u1 >= w || (v1 + 1) * w > self.label.len() || u0 > u1 || v0 > v1 {
             return;
         }
@@ -187,12 +201,13 @@ impl ContactCut {
             self.label[p] = 0;
         }
         for (p, piece) in seeds {
-            if p < self.label.len() && in_region(p) {
-                self.label[p] = piece + 1;
+            let c = self.cell_of(p);
+            if c < self.label.len() && in_region(c) {
+                self.label[c] = piece + 1;
             }
         }
         let level = |p: usize| {
-            let c = contacts.contact_at(p % w, p / w).unwrap_or(0.0);
+            let c = contacts.contact_at((p % w) * s, (p / w) * s).unwrap_or(0.0);
             ((c * LEVELS as f32) as usize).min(LEVELS - 1)
         };
         for l in 0..LEVELS {
@@ -210,8 +225,14 @@ impl ContactCut {
     /// The piece of each frame pixel `(u, v)` of `pixels` into `out` (as far as both reach).
     pub fn pieces_of(&self, pixels: &[[u16; 2]], out: &mut [u8]) {
         for (m, &[u, v]) in out.iter_mut().zip(pixels) {
-            *m = self.piece_at(v as usize * self.width + u as usize) as u8;
+            *m = self.piece_at(v as usize * self.frame_width + u as usize) as u8;
         }
+    }
+
+    /// The cell of frame pixel `p`.
+    fn cell_of(&self, p: usize) -> usize {
+        let (s, fw) = (self.scale.max(1), self.frame_width.max(1));
+        (p / fw / s) * self.width + (p % fw) / s
     }
 
     /// Breadth first from the queued pixels: each unlabelled pixel of `bbox`
@@ -235,7 +256,20 @@ impl ContactCut {
 
     /// The piece (0-based) of region pixel `p` after a successful [`ContactCut::cut`] or a [`ContactCut::grow`].
     pub fn piece_at(&self, p: usize) -> usize {
-        self.label.get(p).map_or(0, |&l| l.saturating_sub(1) as usize)
+        let c = self.cell_of(p);
+        let label = |c: usize| self.label.get(c).copied().unwrap_or(0);
+        let mut l = label(c);
+        // A region pixel whose cell's top-left pixel lay outside the region
+        // takes a neighbouring cell's piece.
+        if l == 0 && self.scale > 1 {
+            let w = self.width;
+            l = [c.wrapping_sub(1), c + 1, c.wrapping_sub(w), c + w]
+                .into_iter()
+                .map(label)
+                .find(|&l| l != 0)
+                .unwrap_or(0);
+        }
+        l.saturating_sub(1) as usize
     }
 }
 
@@ -277,6 +311,28 @@ mod tests {
                 assert_eq!(cut.piece_at(v * 30 + u), want, "pixel ({u}, {v})");
             }
         }
+    }
+
+    /// The same cut on 2 × 2 cells: every region pixel off the band gets
+    /// its side's piece, the border cells' pixels included.
+    #[test]
+    fn a_cut_on_cells_gives_every_region_pixel_its_piece() {
+        let mut cut = ContactCut::default();
+        cut.resize_scaled(30, 12, 2);
+        // Starts on an odd column and row: the left column's cells read outside.
+        let in_region = |p: usize| (3..22).contains(&(p % 30)) && (1..11).contains(&(p / 30));
+        let band = Band(|u, _| Some(if (12..=13).contains(&u) { 0.9 } else { 0.1 }));
+        assert_eq!(cut.cut([0, 0, 29, 11], in_region, &band, 4), Some(2));
+        for v in 1..11 {
+            for u in 3..22 {
+                if !(11..=14).contains(&u) {
+                    assert_eq!(cut.piece_at(v * 30 + u), usize::from(u > 13), "pixel ({u}, {v})");
+                }
+            }
+        }
+        let mut out = [9u8; 2];
+        cut.pieces_of(&[[3, 1], [21, 10]], &mut out);
+        assert_eq!(out, [0, 1]);
     }
 
     #[test]

@@ -12,6 +12,7 @@
 pub mod alternates;
 pub mod contact_cut;
 pub mod cpu_pin;
+pub mod creases;
 pub mod duplicates;
 pub mod explained;
 pub mod exposure;

@@ -113,7 +113,7 @@ pub enum CutProposal {
     /// k-means on the region's 3D points.
     Points,
     /// The segmenter's centre-offset votes where its file has the head and
-    /// they fall into two groups apart; else the 3D points.
+    /// they fall into two groups apart; else as `Creases`.
     Votes,
     /// The votes only: a region whose votes point at one centre is not cut.
     VotesOnly,
@@ -122,6 +122,10 @@ pub enum CutProposal {
     /// else k-means pieces grown from their centres over it; without the
     /// branch, the 3D points.
     Contacts,
+    /// The depth image's concave creases and steps ([`crate::creases`]):
+    /// along them where they part the region into even pieces, else the 3D
+    /// points (not grown over them as `Contacts` are).
+    Creases,
 }
 
 impl std::fmt::Display for CutProposal {
@@ -131,11 +135,12 @@ impl std::fmt::Display for CutProposal {
             Self::Votes => "votes",
             Self::VotesOnly => "votes-only",
             Self::Contacts => "contacts",
+            Self::Creases => "creases",
         })
     }
 }
 
-/// `points`, `votes`, `votes-only` or `contacts`.
+/// `points`, `votes`, `votes-only`, `contacts` or `creases`.
 impl std::str::FromStr for CutProposal {
     type Err = String;
 
@@ -145,7 +150,8 @@ impl std::str::FromStr for CutProposal {
             "votes" => Ok(Self::Votes),
             "votes-only" => Ok(Self::VotesOnly),
             "contacts" => Ok(Self::Contacts),
-            _ => Err(format!("cut proposal {s:?}: expected points, votes, votes-only or contacts")),
+            "creases" => Ok(Self::Creases),
+            _ => Err(format!("cut proposal {s:?}: expected points, votes, votes-only, contacts or creases")),
         }
     }
 }
@@ -376,6 +382,8 @@ pub struct Recut {
     /// [`Recut::set_contacts`].
     contacts: Option<Box<dyn ContactMap + Send>>,
     contact_cut: ContactCut,
+    /// The depth image's band for [`CutProposal::Creases`].
+    crease_band: crate::creases::CreaseBand,
     cluster: Vec<u8>,
     order: Vec<(f32, u8)>,
     /// Per candidate: its pieces' centres (k-means), camera frame.
@@ -430,6 +438,7 @@ impl Recut {
             votes: None,
             contacts: None,
             contact_cut: ContactCut::default(),
+            crease_band: Default::default(),
             cluster: vec![0; SAMPLES],
             order: Vec::with_capacity(SAMPLES),
             centres: Vec::with_capacity(regions),
@@ -537,7 +546,9 @@ impl Recut {
         let own = self.votes.take();
         let own_contacts = self.contacts.take();
         let by_contacts = self.config.proposal == CutProposal::Contacts;
-        if let Some(seg) = segmenter.as_deref_mut() {
+        // The depth image's creases need nothing from the segmenter.
+        let by_creases = self.config.proposal == CutProposal::Creases;
+        if let Some(seg) = segmenter.as_deref_mut().filter(|_| !by_creases) {
             if by_contacts && own_contacts.is_none() {
                 seg.compute_contacts();
             } else if !by_contacts && own.is_none() && self.config.proposal != CutProposal::Points {
@@ -546,7 +557,8 @@ impl Recut {
         }
         let segmenter = segmenter.as_deref();
         let from_segmenter = segmenter.filter(|s| !s.offsets().is_empty()).map(|s| s as &dyn CentreVotes);
-        let votes = own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter).filter(|_| !by_contacts);
+        let votes =
+            own.as_deref().map(|v| v as &dyn CentreVotes).or(from_segmenter).filter(|_| !by_contacts && !by_creases);
         let contacts = own_contacts
             .as_deref()
             .map(|c| c as &dyn ContactMap)
@@ -717,6 +729,10 @@ impl Recut {
         self.ids.resize(w * h, 0);
         if self.config.proposal == CutProposal::Contacts {
             self.contact_cut.resize(w, h);
+        } else if matches!(self.config.proposal, CutProposal::Creases | CutProposal::Votes) {
+            // The creases' band is marked on 2 × 2 cells, and cut on them.
+            self.contact_cut.resize_scaled(w, h, 2);
+            self.crease_band.resize(w, h);
         }
         self.written.clear();
         self.classes.fill(0);
@@ -1000,11 +1016,35 @@ impl Recut {
                     })
                 })
             });
-            // The contact band's pieces, when it parts the region evenly.
-            let contact_pieces = contacts.and_then(|map| {
+            // The contact band's pieces, when it parts the region evenly; with
+            // votes, the depth image's creases where the votes do not cut.
+            let creases = match self.config.proposal {
+                CutProposal::Creases => true,
+                CutProposal::Votes => vote_cut.is_none(),
+                _ => false,
+            };
+            if creases {
+                self.crease_band.mark(frame, [u0, v0, u1, v1], in_region);
+            }
+            let map = if creases { Some(&self.crease_band as &dyn ContactMap) } else { contacts };
+            let contact_pieces = map.and_then(|map| {
                 let k = self.contact_cut.cut([u0, v0, u1, v1], in_region, map, most)?;
                 self.contact_cut.pieces_of(&self.sample_pixels, &mut self.cluster);
                 even(&self.cluster[..n], k).then_some(k)
+            });
+            // A fold between pieces of two colours is where another object
+            // the segmenter gave this class meets it: no copy (the points decide).
+            let contact_pieces = contact_pieces.filter(|&k| {
+                !creases || {
+                    let mut sums = [[0.0f64; 4]; MAX_CUT_PIECES];
+                    for &[u, v] in &self.sample_pixels {
+                        let p = v as usize * w + u as usize;
+                        let Some(rgb) = frame.color.get(p * 3..p * 3 + 3) else { continue };
+                        let s = &mut sums[self.contact_cut.piece_at(p).min(k - 1)];
+                        *s = [s[0] + rgb[0] as f64, s[1] + rgb[1] as f64, s[2] + rgb[2] as f64, s[3] + 1.0];
+                    }
+                    crate::split::shared_chroma(&sums[..k])
+                }
             });
             let ids = &mut self.ids;
             let mut fill = |piece_of: &dyn Fn(usize, usize, usize) -> usize| {
@@ -1057,7 +1097,9 @@ impl Recut {
                 }
                 // With contacts, the samples near their centre seed a flood
                 // that meets where the copies touch, not halfway between centres.
-                let grown = contacts.is_some_and(|map| {
+                // The depth image's creases are no flood levels: grown pieces from
+                // them pass on regions that are no copies (docs/BENCHMARKS.md, session 44).
+                let grown = contacts.filter(|_| self.config.proposal == CutProposal::Contacts).is_some_and(|map| {
                     let near = |i: usize| {
                         let s = self.samples[i];
                         let d = |c: &[f32; 3]| (0..3).map(|j| (s[j] - c[j]).powi(2)).sum::<f32>();

@@ -236,16 +236,7 @@ impl RegionSplitter {
             let s = &mut sums[piece(p)];
             *s = [s[0] + rgb[0] as f64, s[1] + rgb[1] as f64, s[2] + rgb[2] as f64, s[3] + 1.0];
         }
-        let chroma = |s: &[f64; 4]| {
-            let t = (s[0] + s[1] + s[2]).max(1.0);
-            [s[0] / t, s[1] / t]
-        };
-        let largest = (0..k).max_by(|&a, &b| sums[a][3].total_cmp(&sums[b][3])).unwrap_or(0);
-        let reference = chroma(&sums[largest]);
-        sums[..k].iter().all(|s| {
-            let c = chroma(s);
-            ((c[0] - reference[0]).powi(2) + (c[1] - reference[1]).powi(2)).sqrt() <= MAX_CHROMA_DISTANCE
-        })
+        shared_chroma(&sums[..k])
     }
 
     /// The fewest clusters (2..=MAX_PIECES) of the samples that each fit `extent`.
@@ -339,6 +330,22 @@ pub const AREA_FACTOR: f32 = 1.3;
 /// splits: copies side by side differ by under 0.04, most regions that took
 /// in another object by over 0.1).
 pub const MAX_CHROMA_DISTANCE: f64 = 0.08;
+
+/// Whether every piece's mean chromaticity (r, g over r + g + b) lies within
+/// [`MAX_CHROMA_DISTANCE`] of the largest piece's, given each piece's sums
+/// of R, G, B and its pixel count.
+pub fn shared_chroma(sums: &[[f64; 4]]) -> bool {
+    let chroma = |s: &[f64; 4]| {
+        let t = (s[0] + s[1] + s[2]).max(1.0);
+        [s[0] / t, s[1] / t]
+    };
+    let largest = (0..sums.len()).max_by(|&a, &b| sums[a][3].total_cmp(&sums[b][3])).unwrap_or(0);
+    let Some(reference) = sums.get(largest).map(chroma) else { return true };
+    sums.iter().all(|s| {
+        let c = chroma(s);
+        ((c[0] - reference[0]).powi(2) + (c[1] - reference[1]).powi(2)).sqrt() <= MAX_CHROMA_DISTANCE
+    })
+}
 
 /// Whether at most [`TOLERANCE`] of the pairs of `points` lie farther apart
 /// than `extent`.

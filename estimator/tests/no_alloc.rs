@@ -203,6 +203,9 @@ fn the_second_look_does_not_allocate_after_warm_up() {
     // Cut along a contact map (pieces grown over it from their centres).
     let contacts = RecutConfig { proposal: fusepose_estimator::recut::CutProposal::Contacts, ..RecutConfig::DEFAULT };
     second_look_without_allocations(contacts, false, true);
+    // Along the depth image's creases alone (the default's votes fall back to them too).
+    let creases = RecutConfig { proposal: fusepose_estimator::recut::CutProposal::Creases, ..RecutConfig::DEFAULT };
+    second_look_without_allocations(creases, false, false);
 }
 
 /// A contact map that sees no contact anywhere.

@@ -257,11 +257,71 @@ fn cut_proposals_parse_and_a_bad_one_names_the_choices() {
     assert_eq!("votes-only".parse::<CutProposal>(), Ok(CutProposal::VotesOnly));
     assert_eq!("points".parse::<CutProposal>(), Ok(CutProposal::Points));
     assert_eq!("contacts".parse::<CutProposal>(), Ok(CutProposal::Contacts));
-    for p in [CutProposal::Votes, CutProposal::VotesOnly, CutProposal::Points, CutProposal::Contacts] {
+    assert_eq!("creases".parse::<CutProposal>(), Ok(CutProposal::Creases));
+    for p in
+        [CutProposal::Votes, CutProposal::VotesOnly, CutProposal::Points, CutProposal::Contacts, CutProposal::Creases]
+    {
         assert_eq!(p.to_string().parse::<CutProposal>(), Ok(p), "round trip");
     }
     let err = "vote".parse::<CutProposal>().unwrap_err();
-    assert!(err.contains("points, votes, votes-only or contacts"), "{err}");
+    assert!(err.contains("points, votes, votes-only, contacts or creases"), "{err}");
+}
+
+/// Two L blocks turned 35° about the vertical towards each other: their
+/// fronts fold away from the camera where they meet (a V), as touching
+/// copies in a heap do.
+fn folded_pair(l: &BoxObject) -> SyntheticFrame {
+    let turned = |deg: f64, x: f64| {
+        Pose::from_parts(
+            Translation3::new(x, 0.0, 0.5),
+            UnitQuaternion::from_scaled_axis(Vector3::y() * deg.to_radians()),
+        )
+    };
+    painted(render(&[(1, l, turned(-35.0, -0.044)), (1, l, turned(35.0, 0.044))]))
+}
+
+#[test]
+fn the_depth_images_crease_between_two_copies_cuts_the_region_along_it() {
+    let l = l_block();
+    let frame = folded_pair(&l);
+    let cx = common::intrinsics().cx as usize;
+    let objects = object_set(&[l_block()]);
+    let mut icp = IcpEstimator::new(&objects, IcpConfig::default()).unwrap();
+    // The crease's own cut (refit would move it to the pieces' poses).
+    let config = RecutConfig { proposal: CutProposal::Creases, refit: false, ..RecutConfig::DEFAULT };
+    let out = second_look_set(&frame.view(), config, &mut icp, None, |_| ());
+    assert_eq!((out.before, out.stats.tried, out.stats.by_contacts, out.stats.by_votes), (1, 1, 1, 0));
+    assert_eq!(out.stats.kept, 1, "the cut stands");
+    assert_eq!(out.poses.len(), 2);
+    // The pieces meet at the fold, within a few pixels of the frame's centre column.
+    let mut boxes: Vec<[u16; 4]> = out.ws.instances.iter().map(|i| i.bbox).collect();
+    boxes.sort();
+    let (left_end, right_start) = (boxes[0][2] as usize, boxes[1][0] as usize);
+    assert!(left_end.abs_diff(cx) <= 3 && right_start.abs_diff(cx) <= 3, "piece boxes {boxes:?}");
+    // Each pose is its own block's.
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    for (x, truth) in xs.iter().zip([-0.044, 0.044]) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
+
+    // The same fold between pieces of two colours is where another object
+    // the segmenter gave this class meets the first: the points cut it.
+    let mut two_colours = folded_pair(&l);
+    let w = common::intrinsics().width as usize;
+    for (p, &label) in two_colours.labels.iter().enumerate() {
+        if label != 0 && p % w > cx {
+            two_colours.color[p * 3..p * 3 + 3].copy_from_slice(&[60, 110, 150]);
+        }
+    }
+    let out = second_look_set(&two_colours.view(), config, &mut icp, None, |_| ());
+    assert_eq!((out.stats.tried, out.stats.by_contacts), (1, 0), "cut by points");
+
+    // Side by side with flush fronts the depth shows no fold between them:
+    // the 3D points cut the region (not grown over the creases).
+    let frame = pair(&l);
+    let out = second_look_set(&frame.view(), config, &mut icp, None, |_| ());
+    assert_eq!((out.stats.tried, out.stats.by_contacts, out.stats.kept), (1, 0, 1), "cut by points");
 }
 
 #[test]
