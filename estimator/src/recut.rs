@@ -123,8 +123,8 @@ pub enum CutProposal {
     /// branch, the 3D points.
     Contacts,
     /// The depth image's concave creases and steps ([`crate::creases`]):
-    /// along them where they part the region into even pieces, else the 3D
-    /// points (not grown over them as `Contacts` are).
+    /// along them where they part the region into even pieces of one colour,
+    /// else the 3D points (not grown over them as `Contacts` are).
     Creases,
 }
 
