@@ -305,6 +305,12 @@ fn the_depth_images_crease_between_two_copies_cuts_the_region_along_it() {
         assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
     }
 
+    // The default, votes, falls back to the creases where there are no votes.
+    let default = RecutConfig { refit: false, ..RecutConfig::DEFAULT };
+    assert_eq!(default.proposal, CutProposal::Votes);
+    let out = second_look_set(&frame.view(), default, &mut icp, None, |_| ());
+    assert_eq!((out.stats.by_contacts, out.stats.kept), (1, 1), "cut along the fold");
+
     // The same fold between pieces of two colours is where another object
     // the segmenter gave this class meets the first: the points cut it.
     let mut two_colours = folded_pair(&l);
