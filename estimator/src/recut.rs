@@ -1037,10 +1037,11 @@ impl Recut {
             let contact_pieces = contact_pieces.filter(|&k| {
                 !creases || {
                     let mut sums = [[0.0f64; 4]; MAX_CUT_PIECES];
-                    for &[u, v] in &self.sample_pixels {
+                    // `cluster` holds each sample's piece (`pieces_of` above).
+                    for (&[u, v], &piece) in self.sample_pixels.iter().zip(&self.cluster[..n]) {
                         let p = v as usize * w + u as usize;
                         let Some(rgb) = frame.color.get(p * 3..p * 3 + 3) else { continue };
-                        let s = &mut sums[self.contact_cut.piece_at(p).min(k - 1)];
+                        let s = &mut sums[(piece as usize).min(k - 1)];
                         *s = [s[0] + rgb[0] as f64, s[1] + rgb[1] as f64, s[2] + rgb[2] as f64, s[3] + 1.0];
                     }
                     crate::split::shared_chroma(&sums[..k])
@@ -1097,9 +1098,10 @@ impl Recut {
                 }
                 // With contacts, the samples near their centre seed a flood
                 // that meets where the copies touch, not halfway between centres.
-                // The depth image's creases are no flood levels: grown pieces from
-                // them pass on regions that are no copies (docs/BENCHMARKS.md, session 44).
-                let grown = contacts.filter(|_| self.config.proposal == CutProposal::Contacts).is_some_and(|map| {
+                // Only the segmenter's contacts (never the depth image's
+                // creases: grown over them, pieces pass on regions that are
+                // no copies; docs/BENCHMARKS.md, session 44).
+                let grown = contacts.is_some_and(|map| {
                     let near = |i: usize| {
                         let s = self.samples[i];
                         let d = |c: &[f32; 3]| (0..3).map(|j| (s[j] - c[j]).powi(2)).sum::<f32>();

@@ -107,11 +107,7 @@ fn two_touching_copies_in_one_region_get_a_pose_each() {
     assert_eq!(out.verdicts.len(), 2, "a verdict per pose, in step");
     assert!(out.verdicts.iter().all(|v| v.passed));
     assert_eq!(out.ws.instances.len(), 2, "the workspace holds the two pieces");
-    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
-    xs.sort_by(f64::total_cmp);
-    for (x, truth) in xs.iter().zip([-0.04, 0.04]) {
-        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
-    }
+    assert_poses_across(&out, [-0.04, 0.04]);
     for p in out.poses.as_slice() {
         // Each pose's published box and mask are its own piece's.
         let inst = out.ws.instances[p.instance_id as usize];
@@ -150,16 +146,29 @@ fn votes_for_two_centres_cut_the_region_along_them() {
     let config = RecutConfig { proposal: CutProposal::VotesOnly, refit: false, ..RecutConfig::DEFAULT };
     let out = second_look_voted(&frame.view(), config, &mut icp, Some(votes), None);
     assert_eq!((out.before, out.stats.tried, out.stats.by_votes, out.stats.kept), (1, 1, 1, 1));
-    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
-    xs.sort_by(f64::total_cmp);
-    for (x, truth) in xs.iter().zip([-0.04, 0.04]) {
-        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
-    }
+    assert_poses_across(&out, [-0.04, 0.04]);
     // The pieces meet where the votes change sides.
     let cx = common::intrinsics().cx as u16;
     let mut boxes: Vec<[u16; 4]> = out.ws.instances.iter().map(|i| i.bbox).collect();
     boxes.sort();
     assert_eq!((boxes[0][2], boxes[1][0]), (cx - 1, cx), "piece boxes {boxes:?}");
+}
+
+/// Two pieces whose boxes meet within 3 pixels of frame column `cx`.
+fn assert_pieces_meet_at(out: &Outcome, cx: usize) {
+    let mut boxes: Vec<[u16; 4]> = out.ws.instances.iter().map(|i| i.bbox).collect();
+    boxes.sort();
+    let (left_end, right_start) = (boxes[0][2] as usize, boxes[1][0] as usize);
+    assert!(left_end.abs_diff(cx) <= 3 && right_start.abs_diff(cx) <= 3, "piece boxes {boxes:?}");
+}
+
+/// Poses within 2 cm across of their blocks at `truths` (x, metres, left to right).
+fn assert_poses_across(out: &Outcome, truths: [f64; 2]) {
+    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
+    xs.sort_by(f64::total_cmp);
+    for (x, truth) in xs.iter().zip(truths) {
+        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
+    }
 }
 
 /// A contact band as a segmenter's contact branch would give it: probability
@@ -185,17 +194,10 @@ fn a_contact_band_between_two_copies_cuts_the_region_along_it() {
     let out = second_look_set(&frame.view(), config, &mut icp, None, |r| r.set_contacts(Box::new(band)));
     assert_eq!((out.before, out.stats.tried, out.stats.by_contacts, out.stats.by_votes), (1, 1, 1, 0));
     assert_eq!(out.stats.kept, 1, "the cut stands");
-    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
-    xs.sort_by(f64::total_cmp);
-    for (x, truth) in xs.iter().zip([-0.04, 0.04]) {
-        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
-    }
+    assert_poses_across(&out, [-0.04, 0.04]);
     // The band is shared (each band pixel joins the nearer part within the
     // region): the pieces meet within a few pixels of the blocks' contact.
-    let mut boxes: Vec<[u16; 4]> = out.ws.instances.iter().map(|i| i.bbox).collect();
-    boxes.sort();
-    let (left_end, right_start) = (boxes[0][2] as usize, boxes[1][0] as usize);
-    assert!(left_end.abs_diff(cx) <= 3 && right_start.abs_diff(cx) <= 3, "piece boxes {boxes:?}");
+    assert_pieces_meet_at(&out, cx);
 
     // A band off the region does not part it: k-means on the 3D points
     // cuts it, and the pieces grow from their centres over the contacts.
@@ -294,16 +296,9 @@ fn the_depth_images_crease_between_two_copies_cuts_the_region_along_it() {
     assert_eq!(out.stats.kept, 1, "the cut stands");
     assert_eq!(out.poses.len(), 2);
     // The pieces meet at the fold, within a few pixels of the frame's centre column.
-    let mut boxes: Vec<[u16; 4]> = out.ws.instances.iter().map(|i| i.bbox).collect();
-    boxes.sort();
-    let (left_end, right_start) = (boxes[0][2] as usize, boxes[1][0] as usize);
-    assert!(left_end.abs_diff(cx) <= 3 && right_start.abs_diff(cx) <= 3, "piece boxes {boxes:?}");
+    assert_pieces_meet_at(&out, cx);
     // Each pose is its own block's.
-    let mut xs: Vec<f64> = out.poses.as_slice().iter().map(|p| p.translation.x).collect();
-    xs.sort_by(f64::total_cmp);
-    for (x, truth) in xs.iter().zip([-0.044, 0.044]) {
-        assert!((x - truth).abs() < 0.02, "a pose {x:.3} m across, its block at {truth} m");
-    }
+    assert_poses_across(&out, [-0.044, 0.044]);
 
     // The default, votes, falls back to the creases where there are no votes.
     let default = RecutConfig { refit: false, ..RecutConfig::DEFAULT };
