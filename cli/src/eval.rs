@@ -292,6 +292,12 @@ pub struct Args {
     /// at least this (0 = any passing pose).
     #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit)]
     pub recut_min_piece_fit: f32,
+    /// `--recut`: a refused cut's best passed piece pose replaces the
+    /// region's pose where it fits better (by 0.1 and at least 0.8; a failed
+    /// region's pose at a piece fit of 0.95 or more), as the daemon's
+    /// `estimator.recut_best_piece`.
+    #[arg(long, default_value_t = fusepose_estimator::recut::RecutConfig::DEFAULT.best_piece, action = clap::ArgAction::Set)]
+    pub recut_best_piece: bool,
     /// Second masks for failed poses: at most this many per frame get the
     /// pixels inside their posed box (grown by `--remask-margin`) as a new
     /// mask and are estimated again, kept when the new pose passes (0 =
@@ -783,6 +789,7 @@ impl Runner {
                     refit: args.recut_refit,
                     refit_by_verdict: args.recut_refit_by_verdict,
                     min_piece_fit: args.recut_min_piece_fit,
+                    best_piece: args.recut_best_piece,
                     ..fusepose_estimator::recut::RecutConfig::DEFAULT
                 };
                 if recut_config.is_on() && args.verify != "off" {
@@ -1120,7 +1127,7 @@ impl Runner {
             ) {
                 Ok(s) => {
                     self.recut_stats += s;
-                    if s.kept > 0 {
+                    if s.kept > 0 || s.replaced > 0 {
                         verdicts = all.into_iter().map(Some).collect();
                         passed = verdicts.iter().map(|v| v.is_some_and(|v| v.passed)).collect();
                     }
@@ -1340,12 +1347,12 @@ impl Runner {
             );
         }
         if self.recut.is_some() {
-            let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, by_contacts, refused, .. } =
+            let fusepose_estimator::recut::RecutStats { tried, kept, by_votes, by_contacts, refused, replaced, .. } =
                 self.recut_stats;
             let [unverified, close, explained, overlap] = refused;
             println!(
                 "regions looked at again (pose coverage below the recut limit): {tried} cut ({by_votes} along centre votes, {by_contacts} along contacts), {kept} kept (as two or more copies); \
-                 refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap"
+                 refused: {unverified} a piece's pose failed, {close} poses too close, {explained} one pose explains both, {overlap} solids overlap; {replaced} refused regions took their best piece's pose"
             );
         }
         if self.remask.is_some() {

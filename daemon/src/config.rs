@@ -314,6 +314,10 @@ pub struct EstimatorConfig {
     /// fit is at least this (0 = any passing pose;
     /// `fusepose_estimator::recut::RecutConfig::min_piece_fit`).
     pub recut_min_piece_fit: f32,
+    /// `recut`: a refused cut's best passed piece pose replaces the region's
+    /// pose where it fits better
+    /// (`fusepose_estimator::recut::RecutConfig::best_piece`).
+    pub recut_best_piece: bool,
     /// With verification, on class-label planes: at most this many poses per
     /// frame that failed verification get a second mask, the pixels inside
     /// their posed bounding box grown by `remask_margin_m` (above the
@@ -479,6 +483,7 @@ impl Default for EstimatorConfig {
             recut_poses: fusepose_estimator::recut::RecutConfig::DEFAULT.poses.to_string(),
             recut_refit: fusepose_estimator::recut::RecutConfig::DEFAULT.refit,
             recut_min_piece_fit: fusepose_estimator::recut::RecutConfig::DEFAULT.min_piece_fit,
+            recut_best_piece: fusepose_estimator::recut::RecutConfig::DEFAULT.best_piece,
             remask: fusepose_estimator::remask::RemaskConfig::DEFAULT.max_regions,
             remask_margin_m: fusepose_estimator::remask::RemaskConfig::DEFAULT.margin_m,
             remask_rounds: fusepose_estimator::remask::RemaskConfig::DEFAULT.rounds,

@@ -256,6 +256,7 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             poses,
             refit: config.recut_refit,
             min_piece_fit: config.recut_min_piece_fit,
+            best_piece: config.recut_best_piece,
             ..RecutConfig::DEFAULT
         };
         if let Some((objects, _, _)) = spec.verify.as_ref().filter(|_| recut.is_on()) {

@@ -78,6 +78,18 @@ const REFIT_ROUNDS: usize = 2;
 /// box's faces, and depth noise puts half of them just outside (with no
 /// margin the order never applies: tune_pairs as without it, session 35).
 const REFIT_HOLD_M: f32 = 0.005;
+/// [`RecutConfig::best_piece`]: a piece's pose replaces a passed region
+/// pose when its fit is at least this much higher ...
+pub const BEST_PIECE_MARGIN: f32 = 0.1;
+/// ... and at least this: pieces fitting 0.6–0.75 were as often posed
+/// further from their object than the region's pose (path-traced stray
+/// poses up 0.03–0.04 per frame without it; docs/BENCHMARKS.md, session 45).
+pub const BEST_PIECE_MIN_FIT: f32 = 0.8;
+/// [`RecutConfig::best_piece`]: the fit a piece's pose needs to take over a
+/// region whose own pose failed. At 0.9 or below, regions no object explains
+/// (a table patch, a shadow) got a pose from a piece that fits its small
+/// patch (path-traced ghosts and strays up to 0.08 per frame; session 45).
+pub const REVIVE_MIN_FIT: f32 = 0.95;
 /// Fewest valid-depth pixels of a region worth cutting.
 const MIN_POINTS: usize = 64;
 /// Each piece of a cut in two must hold at least this share of the region's
@@ -205,6 +217,13 @@ pub struct RecutConfig {
     /// copies gets a pose between them that passes on its neighbours'
     /// surfaces with a low fit. 0 = any passing pose.
     pub min_piece_fit: f32,
+    /// A refused cut still tells which pose fits: where a piece's pose
+    /// passed and fits its piece by [`BEST_PIECE_MARGIN`] better than the
+    /// region's pose fits the region, and at least [`BEST_PIECE_MIN_FIT`],
+    /// it replaces the region's pose (the region stays one instance). A
+    /// region whose pose failed takes it only at a fit of
+    /// [`REVIVE_MIN_FIT`] or more ([`Recut::take_best_piece`]).
+    pub best_piece: bool,
 }
 
 /// Which poses' regions the second look takes ([`RecutConfig::poses`]).
@@ -263,6 +282,7 @@ impl RecutConfig {
         refit: true,
         refit_by_verdict: false,
         min_piece_fit: 0.0,
+        best_piece: true,
     };
 
     pub fn is_on(&self) -> bool {
@@ -315,6 +335,8 @@ pub struct RecutStats {
     /// a piece without a pose or whose pose failed verification, poses too
     /// close, one pose explaining the other's piece, solids overlapping.
     pub refused: [usize; 4],
+    /// Refused cuts whose best piece's pose replaced the region's.
+    pub replaced: usize,
 }
 
 /// Totals over frames (an evaluation's counts).
@@ -327,6 +349,7 @@ impl std::ops::AddAssign for RecutStats {
         self.estimates += o.estimates;
         self.by_votes += o.by_votes;
         self.by_contacts += o.by_contacts;
+        self.replaced += o.replaced;
         for (r, n) in self.refused.iter_mut().zip(o.refused) {
             *r += n;
         }
@@ -395,6 +418,8 @@ pub struct Recut {
     defer: Option<()>,
     /// Cuts refused in this frame's [`Recut::run`], by [`Refusal`].
     refusals: [usize; 4],
+    /// Refused cuts of this frame whose region took a piece's pose.
+    replaced: usize,
     /// Cuts the next frame refused, per class and midpoint, with the frames
     /// for which no region there is cut again without its pieces' poses.
     refused: Vec<Refused>,
@@ -446,6 +471,7 @@ impl Recut {
             frame_budget: None,
             defer: None,
             refusals: [0; 4],
+            replaced: 0,
             refused: Vec::with_capacity(ws_config.max_instances),
             carried: Vec::with_capacity(ws_config.max_instances),
         })
@@ -594,6 +620,7 @@ impl Recut {
         stats.kept =
             self.with_pieces(frame, |this, view, ids| this.apply(frame, view, verifier, ids, ws, poses, verdicts));
         stats.refused = self.refusals;
+        stats.replaced = std::mem::take(&mut self.replaced);
         Ok(stats)
     }
 
@@ -1219,6 +1246,35 @@ impl Recut {
         if count >= 2 { Ok(count) } else { Err(first.unwrap_or(Refusal::Unverified)) }
     }
 
+    /// A refused cut of candidate `j`: its best-fitting passed piece's pose
+    /// replaces the region's pose `whole` when it fits better
+    /// ([`RecutConfig::best_piece`]). Where the cut found one copy and a piece
+    /// it could not pose, the region's one pose lay between them; the piece's
+    /// pose lies on its copy. The pose keeps the region's instance, box and
+    /// pixel count; its verdict (fit, coverage) is the piece's.
+    fn take_best_piece(&mut self, j: usize, whole: usize, poses: &mut PoseSet, verdicts: &mut [Verification]) {
+        let best = (0..self.candidates[j].pieces as usize)
+            .filter_map(|k| self.piece_pose(j, k))
+            .filter(|&a| self.verdicts[a].passed)
+            .max_by(|&a, &b| self.verdicts[a].fit.total_cmp(&self.verdicts[b].fit));
+        let (Some(a), Some(region)) = (best, verdicts.get(whole).copied()) else { return };
+        let fit = self.verdicts[a].fit;
+        let better = match region.passed {
+            true => fit >= (region.fit + BEST_PIECE_MARGIN).max(BEST_PIECE_MIN_FIT),
+            false => fit >= REVIVE_MIN_FIT,
+        };
+        if better {
+            let own = poses.as_slice()[whole];
+            let piece = self.poses.as_slice()[a];
+            poses.replace(
+                whole,
+                ObjectPose { instance_id: own.instance_id, bbox: own.bbox, mask_pixels: own.mask_pixels, ..piece },
+            );
+            verdicts[whole] = self.verdicts[a];
+            self.replaced += 1;
+        }
+    }
+
     /// Keeps the cuts the depth image supports; returns how many. The
     /// region becomes one instance per copy taken ([`Recut::copies`]); a
     /// piece not taken joins the copy whose piece centre lies nearest (it is
@@ -1245,6 +1301,9 @@ impl Recut {
                 Ok(count) => count,
                 Err(why) => {
                     self.refusals[why as usize] += 1;
+                    if self.config.best_piece {
+                        self.take_best_piece(j, whole, poses, verdicts);
+                    }
                     continue;
                 }
             };

@@ -599,6 +599,67 @@ fn the_region_of_a_failed_pose_is_looked_at_unless_only_passed_poses_are() {
     assert_eq!((any.stats.tried, any.poses.len()), (1, 3), "the default looks at it: a pose per block");
 }
 
+/// Two touching blocks whose region is posed between them, where a piece
+/// of copy A gets A's pose and a piece of copy B one 5 cm too far: B never
+/// passes, so the cut is refused.
+fn one_copy_posed(truths: [Pose; 2]) -> impl Estimator {
+    common::PoseEach(move |_: &fusepose_estimator::Instance, points: &[[f32; 3]]| {
+        let x = common::centroid(points).x;
+        match x {
+            x if x < -0.02 => truths[0],
+            x if x > 0.02 => {
+                let t = truths[1].translation.vector + Vector3::new(0.0, 0.0, 0.05);
+                Pose::from_parts(Translation3::from(t), truths[1].rotation)
+            }
+            _ => pose(10.0, [x as f64, 0.0, 0.5]),
+        }
+    })
+}
+
+#[test]
+fn a_refused_cut_gives_its_region_the_pose_of_its_best_fitting_piece() {
+    let l = l_block();
+    let truths = [pose(10.0, [-0.04, 0.0, 0.5]), pose(10.0, [0.04, 0.0, 0.5])];
+    let frame = pair(&l);
+    let view = frame.view();
+    // Two pieces and no refit: the region's pose, between the copies, covers
+    // too little of it for three, and B's box, posed behind B, would hand B's
+    // pixels to A's piece (either way A's piece holds part of B and fits less).
+    let config = RecutConfig { max_pieces: 2, refit: false, ..RecutConfig::DEFAULT };
+    let run = |best_piece| second_look_with(&view, RecutConfig { best_piece, ..config }, &mut one_copy_posed(truths));
+    let off = run(false);
+    assert_eq!((off.before, off.stats.tried, off.stats.kept), (1, 1, 0), "the cut is refused");
+    assert_eq!(off.stats.replaced, 0);
+    let between = off.poses.as_slice()[0].translation;
+    assert!(between.x.abs() < 0.02, "without it the region keeps its pose between the copies: {between:?}");
+    let on = run(true);
+    assert_eq!((on.stats.kept, on.stats.replaced, on.poses.len()), (0, 1, 1), "one pose, now copy A's");
+    let p = on.poses.as_slice()[0];
+    assert!((p.translation - truths[0].translation.vector).norm() < 1e-9, "{p:?}");
+    let inst = on.ws.instances[p.instance_id as usize];
+    assert_eq!((p.bbox, p.mask_pixels), (inst.bbox, inst.pixels), "the region's box and pixels stay");
+    assert!(
+        on.verdicts[0].passed && on.verdicts[0].fit >= 0.9,
+        "the piece's verdict comes with it: {:?}",
+        on.verdicts[0]
+    );
+}
+
+#[test]
+fn a_refused_cut_whose_pieces_all_fail_leaves_the_region_alone() {
+    let l = l_block();
+    let frame = pair(&l);
+    let view = frame.view();
+    // Every pose 5 cm behind its points: nothing passes, nothing is taken.
+    let mut far = common::PoseEach(|_: &fusepose_estimator::Instance, points: &[[f32; 3]]| {
+        let c = common::centroid(points);
+        pose(10.0, [c.x as f64, 0.0, 0.55])
+    });
+    let out = second_look_with(&view, RecutConfig { max_coverage: 1.01, ..RecutConfig::DEFAULT }, &mut far);
+    assert_eq!((out.stats.tried, out.stats.kept, out.stats.replaced), (1, 0, 0));
+    assert!((out.poses.as_slice()[0].translation.z - 0.55).abs() < 1e-9);
+}
+
 #[test]
 fn pieces_follow_the_share_one_pose_covers() {
     assert_eq!(pieces_for(0.9, 6), 2, "at least two");
