@@ -13,7 +13,9 @@ use common::{BoxObject, SyntheticFrame, l_block, object_set, painted, render};
 use fusepose_estimator::contact_cut::ContactMap;
 use fusepose_estimator::icp::{IcpConfig, IcpEstimator};
 use fusepose_estimator::interpenetration::Solids;
-use fusepose_estimator::recut::{CentreVotes, CutProposal, Recut, RecutConfig, RecutPoses, RecutStats, pieces_for};
+use fusepose_estimator::recut::{
+    CentreVotes, CutProposal, REVIVE_MIN_FIT, Recut, RecutConfig, RecutPoses, RecutStats, pieces_for,
+};
 use fusepose_estimator::seg::{SegConfig, SegEngine, SegFile};
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
 use fusepose_estimator::{CutHint, Estimator, FrameView, LabelPlane, PoseSet, Workspace, WorkspaceConfig};
@@ -632,6 +634,7 @@ fn a_refused_cut_gives_its_region_the_pose_of_its_best_fitting_piece() {
     assert_eq!(off.stats.replaced, 0);
     let between = off.poses.as_slice()[0].translation;
     assert!(between.x.abs() < 0.02, "without it the region keeps its pose between the copies: {between:?}");
+    assert!(!off.verdicts[0].passed, "that pose fails: the piece must fit at least REVIVE_MIN_FIT to revive it");
     let on = run(true);
     assert_eq!((on.stats.kept, on.stats.replaced, on.poses.len()), (0, 1, 1), "one pose, now copy A's");
     let p = on.poses.as_slice()[0];
@@ -639,7 +642,7 @@ fn a_refused_cut_gives_its_region_the_pose_of_its_best_fitting_piece() {
     let inst = on.ws.instances[p.instance_id as usize];
     assert_eq!((p.bbox, p.mask_pixels), (inst.bbox, inst.pixels), "the region's box and pixels stay");
     assert!(
-        on.verdicts[0].passed && on.verdicts[0].fit >= 0.9,
+        on.verdicts[0].passed && on.verdicts[0].fit >= REVIVE_MIN_FIT,
         "the piece's verdict comes with it: {:?}",
         on.verdicts[0]
     );
