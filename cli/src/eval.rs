@@ -46,7 +46,7 @@ use fusepose_estimator::alternates;
 use fusepose_estimator::net::{NetEstimator, NetOptions};
 use fusepose_estimator::pose_odds::PoseOdds;
 use fusepose_estimator::seg::SegEngine;
-use fusepose_estimator::verify::{Verifier, VerifyConfig};
+use fusepose_estimator::verify::{FacingWeights, Verifier, VerifyConfig};
 use fusepose_estimator::{
     ColorFormat, DepthPlane, Estimator, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet, Workspace,
     WorkspaceConfig,
@@ -346,6 +346,16 @@ pub struct Args {
     pub verify_max_depth_continuity: Option<f32>,
     #[arg(long)]
     pub verify_min_thin_mask_agreement: Option<f32>,
+    /// Least share of a pose's depth-agreeing model surface inside its mask,
+    /// for objects 2.5 cm thick or more (0 = off, the default; thin ones have
+    /// their own)
+    #[arg(long)]
+    pub verify_min_mask_agreement: Option<f32>,
+    /// Which verification terms weigh each model sample by how squarely it
+    /// faces the camera: `none` (the default), `off-plane` or `all` (also the
+    /// inlier fraction); `VerifyConfig::facing`
+    #[arg(long, default_value = "none", value_parser = ["none", "off-plane", "all"])]
+    pub verify_facing: String,
     /// Mask agreement from which a pose passes with the looser inlier and fit
     /// minimums below (above 1 = off).
     #[arg(long)]
@@ -420,7 +430,7 @@ pub struct Args {
     /// (`fusepose_estimator::exposure`, after any `--cast`): `off`, `on` or
     /// KEY=VALUE,… over the defaults (target, quantile, max-gain); default
     /// as the daemon's `estimator.auto_exposure`.
-    #[arg(long, default_value = "off")]
+    #[arg(long, default_value = "on")]
     pub auto_exposure: ExposureArg,
 }
 
@@ -875,6 +885,12 @@ impl Runner {
                         min_thin_mask_agreement: args
                             .verify_min_thin_mask_agreement
                             .unwrap_or(d.min_thin_mask_agreement),
+                        min_mask_agreement: args.verify_min_mask_agreement.unwrap_or(d.min_mask_agreement),
+                        facing: match args.verify_facing.as_str() {
+                            "off-plane" => FacingWeights::OffPlane,
+                            "all" => FacingWeights::All,
+                            _ => FacingWeights::None,
+                        },
                         agreeing_mask_agreement: args
                             .verify_agreeing_mask_agreement
                             .unwrap_or(d.agreeing_mask_agreement),

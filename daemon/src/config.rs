@@ -357,8 +357,8 @@ pub struct EstimatorConfig {
     /// step-per-m, share, absorb, absorb-p, slack).
     pub seg_depth_regions: String,
     /// Dim frames brightened by one gain in linear light before the networks
-    /// (`fusepose_estimator::exposure`): `off`, `on` (the measured defaults)
-    /// or `KEY=VALUE,…` over them (target, quantile, max-gain).
+    /// (`fusepose_estimator::exposure`): `on` (the default, with the measured
+    /// settings), `off`, or `KEY=VALUE,…` over them (target, quantile, max-gain).
     pub auto_exposure: String,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
@@ -492,7 +492,7 @@ impl Default for EstimatorConfig {
             seg_boundary: fusepose_estimator::seg::Boundary::default().to_string(),
             seg_voting: "off".to_owned(),
             seg_depth_regions: "on".to_owned(),
-            auto_exposure: "off".to_owned(),
+            auto_exposure: "on".to_owned(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }

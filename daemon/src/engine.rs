@@ -1229,11 +1229,11 @@ mod tests {
     }
 
     #[test]
-    fn auto_exposure_brightens_only_dim_frames_and_is_off_by_default() {
-        assert!(resolve(&shipped_config()).unwrap().auto_exposure.is_none(), "off by default");
-        let on = EstimatorConfig { auto_exposure: "on".into(), ..shipped_config() };
-        let spec = resolve(&on).unwrap();
-        assert_eq!(spec.auto_exposure, Some(ExposureConfig::default()));
+    fn auto_exposure_is_on_by_default_and_brightens_only_dim_frames() {
+        assert_eq!(resolve(&shipped_config()).unwrap().auto_exposure, Some(ExposureConfig::default()), "on by default");
+        let off = EstimatorConfig { auto_exposure: "off".into(), ..shipped_config() };
+        assert!(resolve(&off).unwrap().auto_exposure.is_none());
+        let spec = resolve(&shipped_config()).unwrap();
         let mut engine = PoseEngine::new(&spec).unwrap();
         let intrinsics = fusepose_scene::Intrinsics::YCB_VIDEO;
         let pixels = (intrinsics.width * intrinsics.height) as usize;

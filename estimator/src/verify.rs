@@ -52,7 +52,9 @@
 use fusepose_scene::ObjectSet;
 
 use crate::frame::FrameView;
+use crate::moments::Moments;
 use crate::poses::ObjectPose;
+use crate::sample_normals::{NORMAL_NEIGHBOURS, facing, sample_normals};
 
 /// Thresholds of the check. Defaults chosen on the tuning split (`fusepose render
 /// --split test --seed 7`; never the test split): they drop 1.7 % of the poses
@@ -101,6 +103,14 @@ pub struct VerifyConfig {
     /// `max_depth_continuity`): poses where less than this share of the
     /// model samples agreeing with the depth lie in the mask fail. 0 = off.
     pub min_thin_mask_agreement: f32,
+    /// Whether verification terms weigh each model sample by how squarely it
+    /// faces the camera ([`FacingWeights`]).
+    pub facing: FacingWeights,
+    /// For every other object: poses where less than this share of the
+    /// model samples agreeing with the depth lie in the mask fail (a pose
+    /// whose agreeing surface is a neighbour's or the table's, made up for a
+    /// small region beside it). 0 = off.
+    pub min_mask_agreement: f32,
     /// A pose of an object at least [`Self::agreeing_min_diameter_m`] across
     /// whose depth-agreeing samples lie this much in the mask (mask
     /// agreement) is where the mask says the object is, only imprecise: it
@@ -172,6 +182,8 @@ impl Default for VerifyConfig {
             max_plane_continuation: 0.5,
             max_depth_continuity: 0.8,
             min_thin_mask_agreement: 0.4,
+            min_mask_agreement: 0.0,
+            facing: FacingWeights::None,
             agreeing_mask_agreement: 0.75,
             agreeing_min_inlier_fraction: 0.3,
             agreeing_min_fit: 0.25,
@@ -184,6 +196,27 @@ impl Default for VerifyConfig {
             min_odds: 0.0,
         }
     }
+}
+
+/// Which verification terms count a model sample by the image area it
+/// stands for, `|n · r̂|` (its normal against the viewing ray), instead of
+/// one each. Surface samples are spread uniformly over the object's area, so
+/// a face seen edge-on holds as many as one seen face-on but covers a sliver
+/// of pixels: a box's side seen at 2° made half of a true pose's samples lie
+/// "off" its flat front-face mask. Measured on the tuning splits, not the
+/// default (docs/BENCHMARKS.md, session 46): `OffPlane` gains 0.1 ADD(S) on
+/// average and lets one more stray pose through on a path-traced split,
+/// `All` gains 1 point on touching pairs but passes ghosts of look-alike
+/// classes on path-traced images.
+#[derive(Clone, Copy, Debug, Default, PartialEq, Eq)]
+pub enum FacingWeights {
+    /// Every sample counts once.
+    #[default]
+    None,
+    /// The off-plane share alone.
+    OffPlane,
+    /// The off-plane share and the inlier fraction.
+    All,
 }
 
 /// The outcome of one pose's check.
@@ -254,6 +287,9 @@ pub struct Verifier {
     config: VerifyConfig,
     /// Surface samples per class (id − 1), object frame, metres.
     samples: Vec<Vec<[f32; 3]>>,
+    /// Per class (id − 1): each sample's surface normal (object frame, sign
+    /// arbitrary; [`crate::sample_normals`]).
+    normals: Vec<Vec<[f32; 3]>>,
     /// Per grid cell: a sample agreeing with the measured depth falls in it.
     explained: Vec<bool>,
     /// Per grid cell: the nearest sample's depth (the model's front surface; infinity = none).
@@ -318,6 +354,7 @@ impl Verifier {
             .collect();
         let max_samples = samples.iter().map(Vec::len).max().unwrap_or(0);
         let thin = samples.iter().map(|s| thinnest_extent(s) < THIN_OBJECT_M).collect();
+        let normals = samples.iter().map(|s| sample_normals(s, NORMAL_NEIGHBOURS)).collect();
         Self {
             config: VerifyConfig { grid, ..config },
             explained: vec![false; grid * grid],
@@ -331,6 +368,7 @@ impl Verifier {
                 .map(|s| s.iter().map(|p| (p[0] * p[0] + p[1] * p[1] + p[2] * p[2]).sqrt()).fold(0.0, f32::max))
                 .collect(),
             samples,
+            normals,
             off_table: Vec::new(),
             support: None,
             odds: None,
@@ -409,6 +447,12 @@ impl Verifier {
         let t = pose.translation.map(|v| v as f32);
         let (fx, fy, cx, cy) = (k.fx as f32, k.fy as f32, k.cx as f32, k.cy as f32);
         let project = projector(frame, pose);
+        let rotate =
+            |n: &[f32; 3]| -> [f32; 3] { [0, 1, 2].map(|r| m[(r, 0)] * n[0] + m[(r, 1)] * n[1] + m[(r, 2)] * n[2]) };
+        let to_camera = |p: &[f32; 3]| -> [f32; 3] {
+            let x = rotate(p);
+            [x[0] + t[0], x[1] + t[1], x[2] + t[2]]
+        };
         // Window: the mask's box joined with the model's projected box, inside the image.
         let [mu0, mv0, mu1, mv1] = mask.bbox.map(|v| v as f32);
         let (mut u0, mut v0, mut u1, mut v1) = (mu0, mv0, mu1, mv1);
@@ -431,9 +475,12 @@ impl Verifier {
         self.explained.fill(false);
         self.zbuf.fill(f32::INFINITY);
         let (mut inliers, mut outliers, mut inliers_in_mask) = (0u32, 0u32, 0u32);
+        let (mut inlier_area, mut outlier_area) = (0f32, 0f32);
+        let facing_inliers = cfg.facing == FacingWeights::All;
         self.residuals.clear();
-        for p in samples {
+        for (p, nrm) in samples.iter().zip(&self.normals[class]) {
             let Some((u, v, z)) = project(p) else { continue };
+            let area = if facing_inliers { facing(rotate(nrm), to_camera(p)) } else { 1.0 };
             let (gx, gy) = ((u - u0 + 0.5) / cw, (v - v0 + 0.5) / ch);
             let cell =
                 (gx >= 0.0 && gy >= 0.0 && gx < g as f32 && gy < g as f32).then(|| gy as usize * g + gx as usize);
@@ -458,9 +505,11 @@ impl Verifier {
                 let r = (cfg.lateral_slack_m * fx / z).clamp(2.0, 24.0);
                 if !surface_near(frame, pu as usize, pv as usize, w, h, r, z, tol) {
                     outliers += 1;
+                    outlier_area += area;
                 }
             } else if res >= -tol {
                 inliers += 1;
+                inlier_area += area;
                 inliers_in_mask += (mask.ids[px] == mask.id) as u32;
                 if let Some(c) = cell {
                     self.explained[c] = true;
@@ -503,7 +552,11 @@ impl Verifier {
             }
         }
         let judged = inliers + outliers;
-        let inlier_fraction = if judged > 0 { inliers as f32 / judged as f32 } else { 0.0 };
+        let inlier_fraction = if judged > 0 && inlier_area + outlier_area > 0.0 {
+            inlier_area / (inlier_area + outlier_area)
+        } else {
+            0.0
+        };
         let mask_agreement = if inliers > 0 { inliers_in_mask as f32 / inliers as f32 } else { 0.0 };
         let mask_coverage = if mask_cells > 0 { mask_covered as f32 / mask_cells as f32 } else { 0.0 };
         let behind_fraction = if front_cells > 0 { behind_cells as f32 / front_cells as f32 } else { 0.0 };
@@ -516,27 +569,30 @@ impl Verifier {
         let (plane_continuation, depth_continuity) = border_continuation(frame, mask, flat);
         let off_plane = match flat {
             Some((n, d)) if judged > 0 => {
-                let off = samples
+                let normals = &self.normals[class];
+                let flat_weights = cfg.facing == FacingWeights::None;
+                let (off, all) = samples
                     .iter()
-                    .filter_map(|p| project(p).map(|(u, v, z)| (u, v, z, p)))
-                    .filter(|&(u, v, _, _)| u >= u0 && v >= v0 && u <= u1 && v <= v1)
-                    .filter(|&(u, v, z, _)| {
+                    .zip(normals)
+                    .filter_map(|(p, nrm)| project(p).map(|(u, v, z)| (u, v, z, p, nrm)))
+                    .filter(|&(u, v, _, _, _)| u >= u0 && v >= v0 && u <= u1 && v <= v1)
+                    .filter(|&(u, v, z, _, _)| {
                         let (pu, pv) = (u.round() as usize, v.round() as usize);
                         frame
                             .depth
                             .metres(pv * w + pu)
                             .is_some_and(|z_obs| z_obs - z >= -(cfg.tolerance_base_m + cfg.tolerance_per_m * z))
                     })
-                    .map(|(_, _, _, p)| {
-                        let x = [
-                            m[(0, 0)] * p[0] + m[(0, 1)] * p[1] + m[(0, 2)] * p[2] + t[0],
-                            m[(1, 0)] * p[0] + m[(1, 1)] * p[1] + m[(1, 2)] * p[2] + t[1],
-                            m[(2, 0)] * p[0] + m[(2, 1)] * p[1] + m[(2, 2)] * p[2] + t[2],
-                        ];
-                        ((n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() > OFF_PLANE_M) as u32
+                    .map(|(_, _, _, p, nrm)| {
+                        let x = to_camera(p);
+                        // Each sample weighs the image area it stands for: a face
+                        // seen edge-on covers a sliver of pixels, however many samples it holds.
+                        let weight = if flat_weights { 1.0 } else { facing(rotate(nrm), x) };
+                        let is_off = (n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() > OFF_PLANE_M;
+                        (if is_off { weight } else { 0.0 }, weight)
                     })
-                    .fold((0u32, 0u32), |(o, a), f| (o + f, a + 1));
-                if off.1 > 0 { off.0 as f32 / off.1 as f32 } else { 0.0 }
+                    .fold((0f32, 0f32), |(o, a), (f, wgt)| (o + f, a + wgt));
+                if all > 0.0 { off / all } else { 0.0 }
             }
             _ => 0.0,
         };
@@ -590,7 +646,7 @@ impl Verifier {
             && if self.thin[class] {
                 v.mask_agreement >= cfg.min_thin_mask_agreement
             } else {
-                v.depth_continuity <= cfg.max_depth_continuity
+                v.depth_continuity <= cfg.max_depth_continuity && v.mask_agreement >= cfg.min_mask_agreement
             }
     }
 
@@ -936,47 +992,6 @@ fn border_continuation(frame: &FrameView<'_>, mask: MaskRef<'_>, plane: Option<(
 const FLAT_RMS_M: f32 = 0.003;
 /// A model sample farther than this from a flat patch's plane is off it (metres).
 const OFF_PLANE_M: f32 = 0.015;
-
-/// First and second moments of 3D points, for a least-squares plane.
-#[derive(Default)]
-struct Moments {
-    n: f32,
-    s: [f32; 3],
-    ss: [[f32; 3]; 3],
-}
-
-impl Moments {
-    fn add(&mut self, p: [f32; 3]) {
-        self.n += 1.0;
-        for i in 0..3 {
-            self.s[i] += p[i];
-            for j in 0..3 {
-                self.ss[i][j] += p[i] * p[j];
-            }
-        }
-    }
-
-    /// The points' mean, their axis of least variance (unit) and that
-    /// variance; `None` with fewer than `min_points`.
-    fn least_axis(&self, min_points: f32) -> Option<([f32; 3], [f32; 3], f32)> {
-        if self.n < min_points {
-            return None;
-        }
-        let mean = self.s.map(|v| v / self.n);
-        let cov = nalgebra::Matrix3::from_fn(|i, j| self.ss[i][j] / self.n - mean[i] * mean[j]);
-        let eig = nalgebra::SymmetricEigen::new(cov);
-        let k = eig.eigenvalues.imin();
-        let axis = eig.eigenvectors.column(k);
-        Some((mean, [axis[0], axis[1], axis[2]], eig.eigenvalues[k]))
-    }
-
-    /// The best-fit plane `n·x = d` (unit `n`) when the points lie within
-    /// `max_rms` of it and there are enough of them; else `None`.
-    fn flat_plane(&self, max_rms: f32) -> Option<([f32; 3], f32)> {
-        let (mean, n, variance) = self.least_axis(12.0)?;
-        (variance.max(0.0).sqrt() <= max_rms).then(|| (n, n[0] * mean[0] + n[1] * mean[1] + n[2] * mean[2]))
-    }
-}
 
 /// Median of `v` (reordered in place); NaN when empty.
 fn median(v: &mut [f32]) -> f32 {

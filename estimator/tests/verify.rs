@@ -14,7 +14,7 @@
 
 mod common;
 
-use fusepose_estimator::verify::{MaskRef, THIN_OBJECT_M, Verifier, VerifyConfig, thinnest_extent};
+use fusepose_estimator::verify::{FacingWeights, MaskRef, THIN_OBJECT_M, Verifier, VerifyConfig, thinnest_extent};
 use fusepose_estimator::{ColorFormat, DepthPlane, FrameView, LabelPlane, ObjectPose, Workspace, WorkspaceConfig};
 use fusepose_scene::builtin::builtin_objects;
 use fusepose_scene::render::{NoiseConfig, RenderTarget};
@@ -854,4 +854,121 @@ fn the_shipped_odds_model_rates_true_poses_above_shifted_ones() {
     assert!(checked >= 12, "too few objects checked: {checked}");
     assert!(likely as f64 >= 0.9 * checked as f64, "true poses rated likely right: {likely} of {checked}");
     assert!(above as f64 >= 0.9 * checked as f64, "true above shifted: {above} of {checked}");
+}
+
+/// Depth (metres) and face of the first hit of the ray through pixel `(u, v)`
+/// on a box `[lo, hi]` (object frame) at `pose`: `Some((z, axis))` with the
+/// object-frame axis of the face the ray enters through.
+fn ray_box(k: &Intrinsics, pose: &Pose, lo: [f64; 3], hi: [f64; 3], u: f64, v: f64) -> Option<(f64, usize)> {
+    let d = Vector3::new((u - k.cx) / k.fx, (v - k.cy) / k.fy, 1.0);
+    let inv = pose.inverse();
+    let o = inv.translation.vector;
+    let d = inv.rotation * d;
+    let (mut t0, mut t1, mut axis) = (f64::NEG_INFINITY, f64::INFINITY, 0);
+    for i in 0..3 {
+        if d[i].abs() < 1e-12 {
+            if o[i] < lo[i] || o[i] > hi[i] {
+                return None;
+            }
+            continue;
+        }
+        let (a, b) = ((lo[i] - o[i]) / d[i], (hi[i] - o[i]) / d[i]);
+        let (near, far) = (a.min(b), a.max(b));
+        if near > t0 {
+            (t0, axis) = (near, i);
+        }
+        t1 = t1.min(far);
+    }
+    // The ray's parameter is the camera depth: its direction has z = 1.
+    (t0 <= t1 && t0 > 0.0).then_some((t0, axis))
+}
+
+/// A block standing on a table, facing the camera 7.5 cm right of its axis:
+/// its left face is seen edge-on (2°) as a sliver of a few pixels the mask
+/// leaves out, so the mask is flat. That face holds as many surface samples as the front one and they
+/// all agree with the depth, but they stand for a sliver of image: weighted
+/// by how much image each covers (`FacingWeights::OffPlane`), the off-plane
+/// share stays small and the true pose passes; counted once each (the
+/// default) they make it fail. A floor on the share of its depth-agreeing
+/// surface inside the mask (`min_mask_agreement`) fails it from above that share.
+#[test]
+fn a_face_seen_edge_on_does_not_make_a_true_pose_off_its_flat_mask() {
+    let set = builtin_objects();
+    let block = set.class_of("wood_block").unwrap();
+    let model = set.by_class(block).unwrap();
+    let (lo, hi): ([f64; 3], [f64; 3]) = (model.bbox_min.coords.into(), model.bbox_max.coords.into());
+    let k = Intrinsics::YCB_VIDEO;
+    let (w, h) = (k.width as usize, k.height as usize);
+    // Long axis (object z) up (camera −y), a face towards the camera.
+    let rotation = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2);
+    let mut truth = Pose::from_parts(nalgebra::Translation3::new(0.075, 0.0, 0.9), rotation);
+    // Its bottom face rests on the table plane y = TABLE_Y (camera frame, y down).
+    let bottom = (0..8)
+        .map(|c| {
+            let p = [
+                if c & 1 == 0 { lo[0] } else { hi[0] },
+                if c & 2 == 0 { lo[1] } else { hi[1] },
+                if c & 4 == 0 { lo[2] } else { hi[2] },
+            ];
+            (truth * nalgebra::Point3::from(p)).y
+        })
+        .fold(f64::NEG_INFINITY, f64::max);
+    const TABLE_Y: f64 = 0.08;
+    truth.translation.vector.y += TABLE_Y - bottom;
+    let front_axis = (0..3)
+        .max_by(|&a, &b| {
+            let z = |i: usize| (rotation * Vector3::ith(i, 1.0)).z.abs();
+            z(a).total_cmp(&z(b))
+        })
+        .unwrap();
+    let (mut depth, mut labels) = (vec![0f32; w * h], vec![0u16; w * h]);
+    let (mut front, mut sliver) = (0, 0);
+    for v in 0..h {
+        for u in 0..w {
+            let (uf, vf) = (u as f64, v as f64);
+            let wall = 2.5;
+            let dy = (vf - k.cy) / k.fy;
+            let table = (dy > 0.0).then(|| TABLE_Y / dy).filter(|&z| z < wall);
+            let mut z = table.unwrap_or(wall);
+            if let Some((zb, axis)) = ray_box(&k, &truth, lo, hi, uf, vf).filter(|&(zb, _)| zb < z) {
+                z = zb;
+                if axis == front_axis {
+                    labels[v * w + u] = block;
+                    front += 1;
+                } else {
+                    sliver += 1;
+                }
+            }
+            depth[v * w + u] = z as f32;
+        }
+    }
+    assert!(front > 5_000 && sliver > 300 && sliver < front / 10, "front {front} px, edge-on sliver {sliver} px");
+    let color = vec![128u8; w * h * 3];
+    let frame = FrameView {
+        intrinsics: k,
+        color_format: ColorFormat::Rgb8,
+        color: &color,
+        depth: DepthPlane::F32(&depth),
+        labels: Some(LabelPlane::U16(&labels)),
+    };
+    let mut ws = workspace(&set);
+    assert_eq!(ws.prepare(&frame, 1).unwrap(), 1);
+    let pose = pose_of(block, 0, &ws, &truth);
+    let by_area = VerifyConfig { facing: FacingWeights::OffPlane, ..VerifyConfig::default() };
+    let v = Verifier::new(&set, by_area).verify(&frame, mask(&ws, 0), &pose);
+    // Above 0: the mask was found flat and the sliver's samples counted, but
+    // each as the sliver of image it covers.
+    assert!(v.off_plane > 0.0 && v.off_plane < 0.1, "off-plane share {v:?}");
+    assert!(v.passed, "the true pose failed: {v:?}");
+    // Counted one each (the default), a third or more of its samples lie off.
+    let per_sample = Verifier::new(&set, VerifyConfig::default()).verify(&frame, mask(&ws, 0), &pose);
+    assert!(per_sample.off_plane > 0.3 && !per_sample.passed, "{per_sample:?}");
+    // The sliver agrees with the depth outside the mask: a floor on mask
+    // agreement fails the pose only when set above that share.
+    assert!(v.mask_agreement > 0.4 && v.mask_agreement < 0.8, "{v:?}");
+    for (floor, passes) in [(v.mask_agreement - 0.05, true), (v.mask_agreement + 0.05, false)] {
+        let cfg = VerifyConfig { min_mask_agreement: floor, ..by_area };
+        let judged = Verifier::new(&set, cfg).verify(&frame, mask(&ws, 0), &pose);
+        assert_eq!(judged.passed, passes, "floor {floor}: {judged:?}");
+    }
 }
