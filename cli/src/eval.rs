@@ -432,6 +432,12 @@ pub struct Args {
     /// as the daemon's `estimator.auto_exposure`.
     #[arg(long, default_value = "on")]
     pub auto_exposure: ExposureArg,
+    /// A strongly tinted frame's light undone by one gain per channel before
+    /// the networks, after auto exposure (`fusepose_estimator::white_balance`):
+    /// `off`, `on` or KEY=VALUE,… over the defaults (band, quantile); default
+    /// as the daemon's `estimator.white_balance`.
+    #[arg(long, default_value = "off")]
+    pub white_balance: WhiteBalanceArg,
 }
 
 /// `--cast`'s parser: the casts' names as clap's possible values (shown in `--help`).
@@ -544,12 +550,16 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     );
     bar.set_prefix(runners.iter().map(|r| r.name.clone()).collect::<Vec<_>>().join(","));
     let mut auto_exposure = args.auto_exposure.0.map(fusepose_estimator::exposure::AutoExposure::new);
+    let mut white_balance = args.white_balance.0.map(fusepose_estimator::white_balance::WhiteBalance::new);
     for index in 0..frames {
         let mut frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
         let colour_cast = args.cast.first().copied().unwrap_or(Cast::None);
         colour_cast.apply(&mut frame.rgb, args.seed.wrapping_add(index as u64));
         if let Some(ae) = auto_exposure.as_mut() {
             ae.apply_in_place(&mut frame.rgb);
+        }
+        if let Some(wb) = white_balance.as_mut() {
+            wb.apply_in_place(&mut frame.rgb);
         }
         if let Some(seg) = &mut net_masks {
             seg.segment(&frame).with_context(|| format!("segmenting frame {index}"))?;
@@ -1669,6 +1679,18 @@ impl std::str::FromStr for ExposureArg {
 
     fn from_str(s: &str) -> Result<Self, String> {
         fusepose_estimator::exposure::ExposureConfig::parse_setting(s).map(Self)
+    }
+}
+
+/// `--white-balance`: `off`, `on` or settings.
+#[derive(Clone, Copy, Debug)]
+pub struct WhiteBalanceArg(pub Option<fusepose_estimator::white_balance::WhiteBalanceConfig>);
+
+impl std::str::FromStr for WhiteBalanceArg {
+    type Err = String;
+
+    fn from_str(s: &str) -> Result<Self, String> {
+        fusepose_estimator::white_balance::WhiteBalanceConfig::parse_setting(s).map(Self)
     }
 }
 

@@ -360,6 +360,10 @@ pub struct EstimatorConfig {
     /// (`fusepose_estimator::exposure`): `on` (the default, with the measured
     /// settings), `off`, or `KEY=VALUE,…` over them (target, quantile, max-gain).
     pub auto_exposure: String,
+    /// Strongly tinted frames' light undone by one gain per channel before
+    /// the networks, after auto exposure (`fusepose_estimator::white_balance`):
+    /// `off`, `on` (the measured settings) or `KEY=VALUE,…` over them (band, quantile).
+    pub white_balance: String,
     /// CPUs to pin the loop thread and the network's worker thread to, in that
     /// order (empty = no pinning).
     pub pin_cpus: Vec<usize>,
@@ -493,6 +497,7 @@ impl Default for EstimatorConfig {
             seg_voting: "off".to_owned(),
             seg_depth_regions: "on".to_owned(),
             auto_exposure: "on".to_owned(),
+            white_balance: "off".to_owned(),
             pin_cpus: Vec::new(),
             tracking: TrackingSettings::default(),
         }
@@ -775,6 +780,13 @@ impl DaemonConfig {
                 "estimator.auto_exposure",
                 &e.auto_exposure,
                 "must be \"on\", \"off\" or KEY=VALUE,... (target in (0, 1] linear brightness, quantile in 0..=1, max-gain >= 1)",
+            ));
+        }
+        if fusepose_estimator::white_balance::WhiteBalanceConfig::parse_setting(&e.white_balance).is_err() {
+            return Err(invalid(
+                "estimator.white_balance",
+                &e.white_balance,
+                "must be \"on\", \"off\" or KEY=VALUE,... (band >= 0 as a log ratio, quantile in 0..=1)",
             ));
         }
         if !["drop", "flag", "off"].contains(&e.verify.as_str()) {
@@ -1109,6 +1121,10 @@ mod tests {
         assert!(err.starts_with("estimator.auto_exposure") && err.contains("target in (0, 1]"), "{err}");
         let c = DaemonConfig::parse("[estimator]\nauto_exposure = \"max-gain=2\"\n").unwrap();
         assert_eq!(c.estimator.auto_exposure, "max-gain=2");
+        let err = DaemonConfig::parse("[estimator]\nwhite_balance = \"band=-1\"\n").unwrap_err().to_string();
+        assert!(err.starts_with("estimator.white_balance") && err.contains("band >= 0"), "{err}");
+        let c = DaemonConfig::parse("[estimator]\nwhite_balance = \"band=0.2\"\n").unwrap();
+        assert_eq!(c.estimator.white_balance, "band=0.2");
         let c = DaemonConfig::parse("[estimator]\nseg_depth_regions = \"off\"\n").unwrap();
         assert_eq!(c.estimator.seg_depth_regions, "off");
         let c = DaemonConfig::parse("[estimator]\nseg_boundary = \"erode-cells\"\n").unwrap();

@@ -16,6 +16,7 @@ use fusepose_estimator::remask::{Remask, RemaskConfig};
 use fusepose_estimator::seg::{Boundary, DepthRegionParams, DepthRegions, SegEngine, SegError, SegFile, VotingMode};
 use fusepose_estimator::split::CutLimits;
 use fusepose_estimator::verify::{Verification, Verifier, VerifyConfig};
+use fusepose_estimator::white_balance::{WhiteBalance, WhiteBalanceConfig};
 use fusepose_estimator::{
     EstimateError, Estimator, FrameError, FrameView, IcpConfig, IcpEstimator, LabelPlane, ObjectPose, PoseSet,
     Workspace, WorkspaceConfig,
@@ -83,6 +84,8 @@ pub struct EngineSpec {
     pub seg_depth_regions: Option<(Vec<f32>, DepthRegionParams)>,
     /// `estimator.auto_exposure`: dim frames brightened before the networks (`None` = off).
     pub auto_exposure: Option<ExposureConfig>,
+    /// `estimator.white_balance`: strongly tinted frames corrected before the networks (`None` = off).
+    pub white_balance: Option<WhiteBalanceConfig>,
     /// The network's and segmenter's cost measured at start (network only).
     pub startup_cost: Option<crate::startup_cost::StartupCost>,
     /// The segmenter engine every camera of this spec uses (made by the first
@@ -291,6 +294,8 @@ pub fn resolve(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
         spec.masks = config.masks;
         spec.auto_exposure = ExposureConfig::parse_setting(&config.auto_exposure)
             .map_err(|e| anyhow::anyhow!("estimator.auto_exposure: {e}"))?;
+        spec.white_balance = WhiteBalanceConfig::parse_setting(&config.white_balance)
+            .map_err(|e| anyhow::anyhow!("estimator.white_balance: {e}"))?;
         if let (Some(seg), Some(cost)) = (&spec.segmenter, spec.startup_cost.as_mut()) {
             match crate::startup_cost::measure_segmenter(seg, spec.seg_boundary, spec.seg_depth_regions.as_ref()) {
                 Ok(ns) => cost.segment_ns = Some(ns),
@@ -335,6 +340,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
             auto_exposure: None,
+            white_balance: None,
             startup_cost: None,
             shared_segmenter: Default::default(),
         })
@@ -364,6 +370,7 @@ fn resolve_estimator(config: &EstimatorConfig) -> anyhow::Result<EngineSpec> {
             seg_voting: VotingMode::Off,
             seg_depth_regions: None,
             auto_exposure: None,
+            white_balance: None,
             startup_cost: None,
             shared_segmenter: Default::default(),
         }),
@@ -462,6 +469,7 @@ fn net(config: &EstimatorConfig, objects: Arc<ObjectSet>) -> anyhow::Result<Engi
         seg_voting: VotingMode::Off,
         seg_depth_regions: None,
         auto_exposure: None,
+        white_balance: None,
         startup_cost,
         shared_segmenter: Default::default(),
     })
@@ -538,6 +546,8 @@ pub struct PoseEngine {
     remask_cost: EstimateCost,
     /// `estimator.auto_exposure`: the brightened copy of a dim frame's colour.
     auto_exposure: Option<AutoExposure>,
+    /// `estimator.white_balance`: the corrected copy of a tinted frame's colour.
+    white_balance: Option<WhiteBalance>,
 }
 
 /// Moving average of a step's time per estimate it made (ns; 0 = not yet
@@ -791,6 +801,7 @@ impl PoseEngine {
             remask,
             remask_cost: EstimateCost::default(),
             auto_exposure: spec.auto_exposure.map(AutoExposure::new),
+            white_balance: spec.white_balance.map(WhiteBalance::new),
         })
     }
 
@@ -830,20 +841,32 @@ impl PoseEngine {
             remask: None,
             remask_cost: EstimateCost::default(),
             auto_exposure: None,
+            white_balance: None,
         })
     }
 
     /// Runs prepare + estimate on `frame`; poses are then in [`PoseEngine::poses`].
     /// With `estimator.auto_exposure` the networks see a dim frame brightened
-    /// (its colour copied through one gain; the producer's frame untouched).
+    /// (its colour copied through one gain; the producer's frame untouched),
+    /// then with `estimator.white_balance` a strongly tinted one corrected.
     pub fn run(&mut self, frame: &FrameView<'_>, seed: u64, times: &mut StageTimes) -> Result<(), EngineFailure> {
-        // Taken out for the frame (no allocation) so its copy can be borrowed beside `self`.
+        // Taken out for the frame (no allocation) so their copies can be borrowed beside `self`.
         let mut exposure = self.auto_exposure.take().filter(|_| self.estimator.is_some());
-        // A frame with planes of the wrong size is refused in `run_frame`, gained or not.
+        let mut balance = self.white_balance.take().filter(|_| self.estimator.is_some());
+        // A frame with planes of the wrong size is refused in `run_frame`, corrected or not.
         let gained = exposure.as_mut().and_then(|ae| ae.apply(frame));
-        let result = self.run_frame(gained.as_ref().unwrap_or(frame), seed, times);
+        let exposed = gained.as_ref().unwrap_or(frame);
+        let balanced = balance.as_mut().and_then(|wb| wb.apply(exposed));
+        let result = self.run_frame(balanced.as_ref().unwrap_or(exposed), seed, times);
         self.auto_exposure = exposure;
+        self.white_balance = balance;
         result
+    }
+
+    /// Gains (red, green, blue) applied to the last frame by
+    /// `estimator.white_balance` (all 1 = none or off).
+    pub fn white_balance_gains(&self) -> [f64; 3] {
+        self.white_balance.as_ref().map_or([1.0; 3], WhiteBalance::last_gains)
     }
 
     /// Gain applied to the last frame by `estimator.auto_exposure` (1 = none or off).
@@ -1226,6 +1249,45 @@ mod tests {
         assert!(resolve(&off).unwrap().remask.is_none());
         let unverified = EstimatorConfig { verify: "off".into(), ..shipped_config() };
         assert!(resolve(&unverified).unwrap().remask.is_none(), "no verdicts, nothing to replace");
+    }
+
+    #[test]
+    fn white_balance_is_off_by_default_and_corrects_only_tinted_frames() {
+        assert!(resolve(&shipped_config()).unwrap().white_balance.is_none(), "off by default");
+        let on = EstimatorConfig { white_balance: "on".into(), ..shipped_config() };
+        let spec = resolve(&on).unwrap();
+        assert_eq!(spec.white_balance, Some(WhiteBalanceConfig::default()));
+        let mut engine = PoseEngine::new(&spec).unwrap();
+        let intrinsics = fusepose_scene::Intrinsics::YCB_VIDEO;
+        let pixels = (intrinsics.width * intrinsics.height) as usize;
+        let depth = vec![1.0f32; pixels];
+        let mut times = [0; STAGE_COUNT];
+        // Grey and coloured patches under white light, then under a strongly warm one (blue at a third).
+        for (blue, tinted) in [(1.0f32, false), (0.35, true), (1.0, false)] {
+            let color: Vec<u8> = (0..pixels)
+                .flat_map(|p| {
+                    let px = match p % 640 / 160 {
+                        0 => [180u8, 180, 180],
+                        1 => [170, 60, 50],
+                        2 => [50, 70, 160],
+                        _ => [20, 20, 20],
+                    };
+                    [px[0], px[1], (px[2] as f32 * blue) as u8]
+                })
+                .collect();
+            let frame = FrameView {
+                intrinsics,
+                color_format: fusepose_estimator::ColorFormat::Rgb8,
+                color: &color,
+                depth: fusepose_estimator::DepthPlane::F32(&depth),
+                labels: None,
+            };
+            engine.run(&frame, 1, &mut times).unwrap();
+            let gains = engine.white_balance_gains();
+            assert_eq!(gains[2] > 1.0, tinted, "blue at {blue}: gains {gains:?}");
+        }
+        let bad = EstimatorConfig { white_balance: "band=-1".into(), ..shipped_config() };
+        assert!(resolve(&bad).err().unwrap().to_string().starts_with("estimator.white_balance"));
     }
 
     #[test]

@@ -35,6 +35,7 @@ pub mod split;
 pub mod support;
 pub mod tracking;
 pub mod verify;
+pub mod white_balance;
 pub mod workspace;
 
 pub use frame::{ColorFormat, DepthCensus, DepthPlane, FrameError, FrameView, LabelPlane};

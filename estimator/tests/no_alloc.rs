@@ -400,3 +400,28 @@ fn auto_exposure_does_not_allocate_after_the_first_frame_of_a_size() {
         assert_eq!(n, 0);
     }
 }
+
+#[test]
+fn white_balance_does_not_allocate_after_the_first_frame_of_a_size() {
+    use fusepose_estimator::white_balance::{WhiteBalance, WhiteBalanceConfig};
+    let l = l_block();
+    let plain = render(&[(1, &l, pose([1.0, 0.0, 0.0], 30.0, [0.0, 0.0, 0.5]))]);
+    let mut warm = render(&[(1, &l, pose([0.0, 1.0, 0.0], 50.0, [0.02, 0.0, 0.6]))]);
+    // Blue down to 60 % of its code: far beyond the band.
+    for px in warm.color.chunks_exact_mut(3) {
+        px[2] = (px[2] as f32 * 0.6) as u8;
+    }
+    let mut wb = WhiteBalance::new(WhiteBalanceConfig::default());
+    // The first frame sizes the buffer, corrected or not.
+    let _ = wb.apply(&plain.view());
+    let mut corrected = false;
+    let n = allocations_in(|| corrected = wb.apply(&warm.view()).is_some());
+    assert_eq!(n, 0, "the first tinted frame copies into the buffer sized by the first one");
+    assert!(corrected && wb.last_gains()[2] > 1.0, "blue is raised: {:?}", wb.last_gains());
+    for frame in [&warm, &plain, &warm] {
+        let n = allocations_in(|| {
+            let _ = wb.apply(&frame.view());
+        });
+        assert_eq!(n, 0);
+    }
+}
