@@ -76,6 +76,9 @@ pub struct CameraState {
     pub latency: LatencyBook,
     pub engine: PoseEngine,
     sequence: SequenceTracker,
+    /// Whether the last estimated frame's colour was corrected before the
+    /// networks (auto exposure or white balance); a change is logged.
+    colour_corrected: bool,
     deadline_ns: u64,
     started_ns: u64,
     /// Per rejection reason: a burst of one kind never hides another.
@@ -162,6 +165,7 @@ impl CameraState {
             latency: LatencyBook::new(now_ns),
             engine,
             sequence: SequenceTracker::default(),
+            colour_corrected: false,
             deadline_ns,
             started_ns: now_ns,
             invalid_log: RateLimitByKind::new(LOG_INTERVAL_NS, InvalidReason::COUNT),
@@ -327,6 +331,23 @@ impl CameraState {
         check_capture_time(header.capture_time_ns, received_ns)
     }
 
+    /// Logs when the camera's frames start or stop being corrected before the
+    /// networks (a dim or tinted camera), once per change, not per frame.
+    fn log_colour_correction(&mut self, sequence: u64) {
+        let gain = self.engine.exposure_gain();
+        let balance = self.engine.white_balance_gains();
+        let corrected = gain > 1.0 || balance != [1.0; 3];
+        if corrected != self.colour_corrected {
+            self.colour_corrected = corrected;
+            if corrected {
+                tracing::info!(camera = %self.name, sequence, exposure_gain = gain, white_balance_gains = ?balance,
+                    "frames are dim or tinted: colour corrected before the networks (estimator.auto_exposure / white_balance)");
+            } else {
+                tracing::info!(camera = %self.name, sequence, "frames well exposed again: colour no longer corrected");
+            }
+        }
+    }
+
     /// Runs the engine on a checked frame and fills `msg`; returns whether
     /// the frame counts as processed (OK or estimator failure, not refused).
     fn estimate(
@@ -351,6 +372,7 @@ impl CameraState {
                 .unwrap_or(Err(EngineFailure::Panicked));
         match outcome {
             Ok(()) => {
+                self.log_colour_correction(header.sequence);
                 // The frame's own instance plane defined every mask (unless the segmenter replaced it).
                 let from_instances = view.labels.is_some_and(|l| l.is_instances()) && self.engine.uses_frame_labels();
                 let flags = if from_instances { PoseFlags::FROM_INSTANCE_LABELS } else { 0 };

@@ -4,6 +4,7 @@
 //! (`masks = "auto"`), estimates poses with the fusion network and publishes
 //! them. The published classes must be the visible objects' and their poses
 //! close to the renderer's ground truth; the segmentation stage must be timed.
+//! A camera that turns dim and back is logged once each way (auto exposure).
 
 use std::path::PathBuf;
 use std::time::Duration;
@@ -75,5 +76,45 @@ fn frames_without_labels_are_segmented_and_get_poses() -> anyhow::Result<()> {
     let seg = &stats.since_start[Stage::Segmentation as usize];
     assert_eq!(seg.count, frames, "segmentation time recorded once per frame: {stats:?}");
     assert!(seg.max_ns > 0, "{seg:?}");
+    Ok(())
+}
+
+/// A camera that turns dim and back (auto exposure is on by default): the
+/// daemon says so once each way in its log, not once per frame.
+#[test]
+fn a_camera_turning_dim_and_back_is_logged_once_each_way() -> anyhow::Result<()> {
+    let env = TestEnv::new("dim-log")?;
+    let config = env.write_daemon_config(&format!(
+        "kind = \"net\"\nweights = {:?}\nmasks = \"auto\"\nmax_instances = 8\nworker_threads = 2\ndeadline_aware = false",
+        weights().canonicalize()?
+    ))?;
+    let log = env.dir.path().join("fuseposed.log");
+    let mut daemon = spawn_daemon(&env, &config, Some(&log))?;
+    query_stats(&env, Duration::from_secs(30))?;
+
+    let objects = fusepose_scene::builtin::builtin_objects();
+    let k = Intrinsics::YCB_VIDEO;
+    let ipc = Ipc::new(&env.ipc_options())?;
+    let mut producer = Producer::create(&ipc, "cam0", rendered_layout(&k))?;
+    let mut consumer = Consumer::open(&ipc, "cam0")?;
+    let mut target = RenderTarget::for_intrinsics(&k);
+    let scene = sample_scene(&objects, &SamplerConfig::default(), 2100).map_err(|e| anyhow::anyhow!("{e}"))?;
+    render_view_labelled(&scene, &objects, 0, &k, &NoiseConfig::default(), LabelKind::Class, &mut target)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    let bright = target.rgb().to_vec();
+    // About -3 EV: sRGB codes at a third.
+    let dim: Vec<u8> = bright.iter().map(|&v| v / 3).collect();
+    for colour in [&bright, &dim, &dim, &bright, &bright] {
+        target.rgb_mut().copy_from_slice(colour);
+        let sequence = send_rendered(&mut producer, &k, &target)?;
+        let msg = wait_for_sequence(&mut consumer, sequence, Duration::from_secs(120))?;
+        assert!(msg.is_ok(), "frame {sequence}: status {:#x}", msg.status);
+    }
+    daemon.signal(libc::SIGTERM);
+    daemon.wait_timeout(Duration::from_secs(10))?;
+    let text = std::fs::read_to_string(&log)?;
+    let count = |needle: &str| text.lines().filter(|l| l.contains(needle)).count();
+    assert_eq!(count("colour corrected before the networks"), 1, "one line when the camera turned dim:\n{text}");
+    assert_eq!(count("colour no longer corrected"), 1, "one line when it was bright again:\n{text}");
     Ok(())
 }
