@@ -66,29 +66,20 @@ impl ExposureConfig {
     /// `on` (the defaults) or a comma list of `KEY=VALUE` over the defaults
     /// (`target`, `quantile`, `max-gain`).
     pub fn parse_setting(s: &str) -> Result<Option<Self>, String> {
-        match s {
-            "off" => return Ok(None),
-            "on" => return Ok(Some(Self::default())),
-            _ => {}
-        }
-        let mut c = Self::default();
-        for item in s.split(',') {
-            let (key, value) = item
-                .split_once('=')
-                .ok_or_else(|| format!("auto exposure: `{item}` is not KEY=VALUE (or use `on` / `off`)"))?;
-            let v: f64 =
-                value.trim().parse().map_err(|_| format!("auto exposure: `{key}` needs a number, got `{value}`"))?;
-            match key.trim() {
-                "target" => c.target = v,
-                "quantile" => c.quantile = v,
-                "max-gain" => c.max_gain = v,
-                other => {
-                    return Err(format!("auto exposure: unknown key `{other}`; expected target, quantile or max-gain"));
+        crate::settings::parse_on_off(
+            s,
+            "auto exposure",
+            |c: &mut Self, key, v| {
+                match key {
+                    "target" => c.target = v,
+                    "quantile" => c.quantile = v,
+                    "max-gain" => c.max_gain = v,
+                    other => return Err(format!("unknown key `{other}`; expected target, quantile or max-gain")),
                 }
-            }
-        }
-        c.validate().map_err(|m| format!("auto exposure: {m}"))?;
-        Ok(Some(c))
+                Ok(())
+            },
+            Self::validate,
+        )
     }
 }
 

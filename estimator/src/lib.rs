@@ -31,6 +31,7 @@ pub mod resident;
 pub mod sample_normals;
 pub mod sampling;
 pub mod seg;
+mod settings;
 pub mod split;
 pub mod support;
 pub mod tracking;

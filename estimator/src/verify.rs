@@ -288,7 +288,8 @@ pub struct Verifier {
     /// Surface samples per class (id − 1), object frame, metres.
     samples: Vec<Vec<[f32; 3]>>,
     /// Per class (id − 1): each sample's surface normal (object frame, sign
-    /// arbitrary; [`crate::sample_normals`]).
+    /// arbitrary; [`crate::sample_normals`]); empty when
+    /// [`VerifyConfig::facing`] is `None`.
     normals: Vec<Vec<[f32; 3]>>,
     /// Per grid cell: a sample agreeing with the measured depth falls in it.
     explained: Vec<bool>,
@@ -354,7 +355,14 @@ impl Verifier {
             .collect();
         let max_samples = samples.iter().map(Vec::len).max().unwrap_or(0);
         let thin = samples.iter().map(|s| thinnest_extent(s) < THIN_OBJECT_M).collect();
-        let normals = samples.iter().map(|s| sample_normals(s, NORMAL_NEIGHBOURS)).collect();
+        // O(n²) per object: only when a term uses them.
+        let normals =
+            samples
+                .iter()
+                .map(|s| {
+                    if config.facing == FacingWeights::None { Vec::new() } else { sample_normals(s, NORMAL_NEIGHBOURS) }
+                })
+                .collect();
         Self {
             config: VerifyConfig { grid, ..config },
             explained: vec![false; grid * grid],
@@ -478,9 +486,9 @@ impl Verifier {
         let (mut inlier_area, mut outlier_area) = (0f32, 0f32);
         let facing_inliers = cfg.facing == FacingWeights::All;
         self.residuals.clear();
-        for (p, nrm) in samples.iter().zip(&self.normals[class]) {
+        for (i, p) in samples.iter().enumerate() {
             let Some((u, v, z)) = project(p) else { continue };
-            let area = if facing_inliers { facing(rotate(nrm), to_camera(p)) } else { 1.0 };
+            let area = if facing_inliers { facing(rotate(&self.normals[class][i]), to_camera(p)) } else { 1.0 };
             let (gx, gy) = ((u - u0 + 0.5) / cw, (v - v0 + 0.5) / ch);
             let cell =
                 (gx >= 0.0 && gy >= 0.0 && gx < g as f32 && gy < g as f32).then(|| gy as usize * g + gx as usize);
@@ -573,8 +581,8 @@ impl Verifier {
                 let flat_weights = cfg.facing == FacingWeights::None;
                 let (off, all) = samples
                     .iter()
-                    .zip(normals)
-                    .filter_map(|(p, nrm)| project(p).map(|(u, v, z)| (u, v, z, p, nrm)))
+                    .enumerate()
+                    .filter_map(|(i, p)| project(p).map(|(u, v, z)| (u, v, z, p, i)))
                     .filter(|&(u, v, _, _, _)| u >= u0 && v >= v0 && u <= u1 && v <= v1)
                     .filter(|&(u, v, z, _, _)| {
                         let (pu, pv) = (u.round() as usize, v.round() as usize);
@@ -583,11 +591,11 @@ impl Verifier {
                             .metres(pv * w + pu)
                             .is_some_and(|z_obs| z_obs - z >= -(cfg.tolerance_base_m + cfg.tolerance_per_m * z))
                     })
-                    .map(|(_, _, _, p, nrm)| {
+                    .map(|(_, _, _, p, i)| {
                         let x = to_camera(p);
                         // Each sample weighs the image area it stands for: a face
                         // seen edge-on covers a sliver of pixels, however many samples it holds.
-                        let weight = if flat_weights { 1.0 } else { facing(rotate(nrm), x) };
+                        let weight = if flat_weights { 1.0 } else { facing(rotate(&normals[i]), x) };
                         let is_off = (n[0] * x[0] + n[1] * x[1] + n[2] * x[2] - d).abs() > OFF_PLANE_M;
                         (if is_off { weight } else { 0.0 }, weight)
                     })

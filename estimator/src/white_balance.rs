@@ -58,26 +58,19 @@ impl WhiteBalanceConfig {
     /// `on` (the defaults) or a comma list of `KEY=VALUE` over the defaults
     /// (`band`, `quantile`).
     pub fn parse_setting(s: &str) -> Result<Option<Self>, String> {
-        match s {
-            "off" => return Ok(None),
-            "on" => return Ok(Some(Self::default())),
-            _ => {}
-        }
-        let mut c = Self::default();
-        for item in s.split(',') {
-            let (key, value) = item
-                .split_once('=')
-                .ok_or_else(|| format!("white balance: `{item}` is not KEY=VALUE (or use `on` / `off`)"))?;
-            let v: f64 =
-                value.trim().parse().map_err(|_| format!("white balance: `{key}` needs a number, got `{value}`"))?;
-            match key.trim() {
-                "band" => c.band = v,
-                "quantile" => c.quantile = v,
-                other => return Err(format!("white balance: unknown key `{other}`; expected band or quantile")),
-            }
-        }
-        c.validate().map_err(|m| format!("white balance: {m}"))?;
-        Ok(Some(c))
+        crate::settings::parse_on_off(
+            s,
+            "white balance",
+            |c: &mut Self, key, v| {
+                match key {
+                    "band" => c.band = v,
+                    "quantile" => c.quantile = v,
+                    other => return Err(format!("unknown key `{other}`; expected band or quantile")),
+                }
+                Ok(())
+            },
+            Self::validate,
+        )
     }
 }
 
