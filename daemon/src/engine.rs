@@ -1251,6 +1251,17 @@ mod tests {
         assert!(resolve(&unverified).unwrap().remask.is_none(), "no verdicts, nothing to replace");
     }
 
+    /// An RGB frame without labels.
+    fn rgb_frame<'a>(intrinsics: fusepose_scene::Intrinsics, color: &'a [u8], depth: &'a [f32]) -> FrameView<'a> {
+        FrameView {
+            intrinsics,
+            color_format: fusepose_estimator::ColorFormat::Rgb8,
+            color,
+            depth: fusepose_estimator::DepthPlane::F32(depth),
+            labels: None,
+        }
+    }
+
     #[test]
     fn white_balance_is_off_by_default_and_corrects_only_tinted_frames() {
         assert!(resolve(&shipped_config()).unwrap().white_balance.is_none(), "off by default");
@@ -1275,14 +1286,7 @@ mod tests {
                     [px[0], px[1], (px[2] as f32 * blue) as u8]
                 })
                 .collect();
-            let frame = FrameView {
-                intrinsics,
-                color_format: fusepose_estimator::ColorFormat::Rgb8,
-                color: &color,
-                depth: fusepose_estimator::DepthPlane::F32(&depth),
-                labels: None,
-            };
-            engine.run(&frame, 1, &mut times).unwrap();
+            engine.run(&rgb_frame(intrinsics, &color, &depth), 1, &mut times).unwrap();
             let gains = engine.white_balance_gains();
             assert_eq!(gains[2] > 1.0, tinted, "blue at {blue}: gains {gains:?}");
         }
@@ -1306,14 +1310,7 @@ mod tests {
             let color: Vec<u8> = (0..pixels)
                 .flat_map(|p| if p % 640 < 400 { [level, level / 2, level / 3] } else { [20, 20, 20] })
                 .collect();
-            let frame = FrameView {
-                intrinsics,
-                color_format: fusepose_estimator::ColorFormat::Rgb8,
-                color: &color,
-                depth: fusepose_estimator::DepthPlane::F32(&depth),
-                labels: None,
-            };
-            engine.run(&frame, 1, &mut times).unwrap();
+            engine.run(&rgb_frame(intrinsics, &color, &depth), 1, &mut times).unwrap();
             assert_eq!(engine.exposure_gain() > 1.0, dim, "level {level}: gain {}", engine.exposure_gain());
         }
         let bad = EstimatorConfig { auto_exposure: "target=0".into(), ..shipped_config() };

@@ -84,7 +84,21 @@ impl ExposureConfig {
 }
 
 /// Every `METER_STRIDE`-th pixel is metered.
-const METER_STRIDE: usize = 7;
+pub(crate) const METER_STRIDE: usize = 7;
+
+/// The 8-bit code at index `⌊(n − 1) · quantile⌋` of the sorted readings
+/// that `histogram` counts (`n` of them, at least one).
+pub(crate) fn order_statistic(histogram: &[u32; 256], n: usize, quantile: f64) -> u8 {
+    let index = ((n.max(1) - 1) as f64 * quantile) as usize;
+    let mut below = 0usize;
+    for (code, &count) in histogram.iter().enumerate() {
+        below += count as usize;
+        if below > index {
+            return code as u8;
+        }
+    }
+    255
+}
 
 /// The auto-exposure stage of one camera (holds the brightened copy).
 #[derive(Clone, Debug)]
@@ -133,15 +147,7 @@ impl AutoExposure {
         if n == 0 {
             return 0.0;
         }
-        let index = ((n - 1) as f64 * self.config.quantile) as usize;
-        let mut below = 0usize;
-        for (code, &count) in histogram.iter().enumerate() {
-            below += count as usize;
-            if below > index {
-                return self.decode[code];
-            }
-        }
-        self.decode[255]
+        self.decode[order_statistic(&histogram, n, self.config.quantile) as usize]
     }
 
     /// The gain for a colour plane: `clamp(target / meter, 1, max_gain)`.

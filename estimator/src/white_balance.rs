@@ -22,6 +22,7 @@
 
 use fusepose_scene::render::srgb;
 
+use crate::exposure::{METER_STRIDE, order_statistic};
 use crate::frame::{ColorFormat, FrameView};
 
 /// Settings of [`WhiteBalance`].
@@ -74,8 +75,6 @@ impl WhiteBalanceConfig {
     }
 }
 
-/// Every `METER_STRIDE`-th pixel is metered.
-const METER_STRIDE: usize = 7;
 /// Pixels with a channel at or above this sRGB code are clipped highlights:
 /// their colour is the sensor's limit, not the light's.
 const SATURATED: u8 = 250;
@@ -132,18 +131,8 @@ impl WhiteBalance {
         if n == 0 {
             return None;
         }
-        let index = ((n - 1) as f64 * self.config.quantile) as usize;
-        let reading = |h: &[u32; 256]| {
-            let mut below = 0usize;
-            for (code, &count) in h.iter().enumerate() {
-                below += count as usize;
-                if below > index {
-                    // A black channel would make the ratio infinite.
-                    return self.decode[code].max(1e-4);
-                }
-            }
-            self.decode[255]
-        };
+        // A black channel would make the ratio infinite.
+        let reading = |h: &[u32; 256]| self.decode[order_statistic(h, n, self.config.quantile) as usize].max(1e-4);
         let [r, g, b] = histograms.each_ref().map(reading);
         Some(((r / g).ln(), (b / g).ln()))
     }
