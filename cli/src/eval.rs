@@ -18,7 +18,9 @@
 //! Masks: `--masks gt` uses the dataset's ground-truth class labels, `--masks
 //! net` the built-in segmenter's ([`masks`]); `--masks gt,net` evaluates
 //! every estimator with both on the same frames. `--overlay DIR` writes one
-//! PNG per frame (labels tinted, poses drawn).
+//! PNG per frame: the instances the last estimator posed tinted, each copy of
+//! a class in its own shade with a white line where two meet, and each pose
+//! drawn in its instance's shade.
 //!
 //! Verification (`--verify drop|flag|off`, default `drop` as in the daemon)
 //! checks each pose against the depth image and counts what fails, ghosts
@@ -57,6 +59,8 @@ use fusepose_scene::metrics::{
 use fusepose_scene::render::cast::Cast;
 use fusepose_scene::{ObjectSet, Pose};
 use indicatif::{ProgressBar, ProgressStyle};
+
+use crate::pose_overlay::{DrawnPose, Tint};
 
 use dataset::{EvalDataset, EvalFrame, GtObject};
 use masks::NetMasks;
@@ -168,8 +172,10 @@ pub struct Args {
     /// pixels eroded); default: the engine's.
     #[arg(long)]
     pub seg_boundary: Option<fusepose_estimator::seg::Boundary>,
-    /// Write one PNG per frame here: labels tinted (the segmenter's with `--masks net`),
-    /// the poses of the last estimator drawn.
+    /// Write one PNG per frame here: the last estimator's instances tinted (the
+    /// segmenter's regions after any cut with `--masks net`; each copy of a
+    /// class its own shade, a white line where two meet), its poses drawn in
+    /// their instance's shade.
     #[arg(long)]
     pub overlay: Option<PathBuf>,
     /// Object set: `builtin` or a mesh folder (default: the one the dataset names, else builtin).
@@ -578,13 +584,26 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
             runner.evaluate(&frame, labels, seg_engine, args.seed.wrapping_add(index as u64), &metrics)?;
         }
         if let (Some(dir), Some(last)) = (&args.overlay, runners.last()) {
-            let labels = match (last.masks, &net_masks) {
-                (MaskSource::Net, Some(seg)) => &seg.class_labels,
-                _ => &frame.labels,
+            // The instances the estimator posed, after the second look's cuts.
+            let ws = &last.workspace;
+            let instances: Vec<(u32, u16)> =
+                (0..ws.instances.len()).filter_map(|i| Some((ws.component_id(i)?, ws.instances[i].class_id))).collect();
+            let poses: Vec<DrawnPose> = last
+                .poses
+                .as_slice()
+                .iter()
+                .map(|p| DrawnPose {
+                    class_id: p.class_id,
+                    pose: pose_of(p),
+                    instance: ws.component_id(p.instance_id as usize),
+                })
+                .collect();
+            let tint = match ws.component_ids().len() == frame.labels.len() {
+                true => Tint::Instances { ids: ws.component_ids(), instances: &instances },
+                false => Tint::Classes(&frame.labels),
             };
-            let poses: Vec<(u16, Pose)> = last.poses.as_slice().iter().map(|p| (p.class_id, pose_of(p))).collect();
             let path = dir.join(format!("{:06}_{:06}.png", frame.scene_id, frame.im_id));
-            crate::pose_overlay::write(&path, &frame.intrinsics, &frame.rgb, Some(labels), &poses, &objects)?;
+            crate::pose_overlay::write(&path, &frame.intrinsics, &frame.rgb, tint, &poses, &objects)?;
         }
         bar.inc(1);
     }

@@ -9,8 +9,9 @@
 //!   only) and/or its projected object-frame bounding box, in the object's colour.
 //!
 //! Plus, per frame: a label-map tint ([`tint_labels`], colour per class id from
-//! [`label_colour`], alpha-blended) and a text-free legend of colour swatches
-//! ([`draw_legend`]).
+//! [`label_colour`], alpha-blended) or an instance tint that tells copies of
+//! one class apart ([`tint_instances`]: a shade per instance, white where two
+//! meet), and a text-free legend of colour swatches ([`draw_legend`]).
 //!
 //! Projection is [`Intrinsics::project`] (pixel centres at integer
 //! coordinates, the renderer's convention), so an overlay of the true pose lies
@@ -35,6 +36,9 @@ use nalgebra::Point3;
 use std::path::Path;
 
 pub use crate::contact_sheet::label_colour;
+pub use instances::{INSTANCE_BORDER, INSTANCE_SHADES, instance_colour, tint_instances};
+
+mod instances;
 
 /// Axis colours: x red, y green, z blue.
 pub const AXIS_COLOURS: [[u8; 3]; 3] = [[255, 0, 0], [0, 255, 0], [0, 0, 255]];

@@ -4,6 +4,10 @@
 //! with the labels tinted and the poses drawn (`crate::pose_overlay`). Labels
 //! are the frame's own when it carries them, else the built-in segmenter's
 //! from `--weights` (the same network the daemon runs, so the same labels).
+//! A frame's instance plane is tinted per instance, and each pose takes the
+//! shade of the instance of its class holding most of its mask's box (the
+//! message's `instance_id` is the daemon's, not the producer's); elsewhere
+//! the copies of a class are told apart by their poses' shades.
 
 use std::collections::VecDeque;
 use std::path::{Path, PathBuf};
@@ -14,6 +18,8 @@ use fusepose_estimator::seg::SegEngine;
 use fusepose_estimator::{DepthPlane, FrameView};
 use fusepose_scene::{Intrinsics, ObjectSet, Pose};
 use nalgebra::{Quaternion, Translation3, UnitQuaternion};
+
+use crate::pose_overlay::{DrawnPose, Tint};
 
 /// Frames kept while waiting for their pose messages.
 const FRAMES_KEPT: usize = 8;
@@ -26,6 +32,8 @@ pub struct OverlayWriter {
     frames: VecDeque<(FrameHeader, Vec<u8>)>,
     rgb: Vec<u8>,
     labels: Vec<u16>,
+    /// A frame's instance plane widened to the overlay's id type.
+    instance_ids: Vec<u32>,
 }
 
 /// The pose of a wire quaternion `[x, y, z, w]` and translation (metres); `None` unless finite.
@@ -49,6 +57,7 @@ impl OverlayWriter {
             frames: VecDeque::new(),
             rgb: Vec::new(),
             labels: Vec::new(),
+            instance_ids: Vec::new(),
         })
     }
 
@@ -76,6 +85,7 @@ impl OverlayWriter {
             ColorFormat::Bgr8 => self.rgb.extend(planes.color.chunks_exact(3).flat_map(|p| [p[2], p[1], p[0]])),
         }
         self.labels.resize(pixels, 0);
+        let mut instances: Vec<(u32, u16)> = Vec::new();
         let labels = match (planes.labels, &mut self.segmenter) {
             (Some(LabelData::U8(l)), _) => {
                 self.labels.iter_mut().zip(l).for_each(|(d, &s)| *d = s as u16);
@@ -84,8 +94,20 @@ impl OverlayWriter {
             (Some(LabelData::U16(l)), _) => Some(l),
             (Some(LabelData::Instances { ids, classes }), _) => {
                 let class = |id: u16| classes.get(id as usize).copied().unwrap_or(0);
-                self.labels.iter_mut().zip(ids).for_each(|(d, &id)| *d = class(id));
-                Some(&self.labels[..])
+                self.instance_ids.clear();
+                self.instance_ids.extend(ids.iter().map(|&id| id as u32));
+                let mut present = vec![false; classes.len()];
+                for &id in ids {
+                    if let Some(p) = present.get_mut(id as usize) {
+                        *p = true;
+                    }
+                }
+                instances.extend(
+                    (1..present.len())
+                        .filter(|&id| present[id] && class(id as u16) != 0)
+                        .map(|id| (id as u32, class(id as u16))),
+                );
+                None
             }
             (None, Some(seg)) => {
                 let view = FrameView {
@@ -104,13 +126,70 @@ impl OverlayWriter {
             }
             (None, None) => None,
         };
-        let poses: Vec<(u16, Pose)> = msg
+        let width = h.width as usize;
+        let poses: Vec<DrawnPose> = msg
             .objects()
             .iter()
-            .filter_map(|o| Some((o.class_id, wire_pose(o.quaternion, o.translation_m)?)))
+            .filter_map(|o| {
+                let pose = wire_pose(o.quaternion, o.translation_m)?;
+                let instance = instance_in_box(&self.instance_ids, width, &instances, o.class_id, o.bbox);
+                Some(DrawnPose { class_id: o.class_id, pose, instance })
+            })
             .collect();
+        let tint = match labels {
+            Some(l) => Tint::Classes(l),
+            None if !instances.is_empty() => Tint::Instances { ids: &self.instance_ids, instances: &instances },
+            None => Tint::None,
+        };
         let path = self.dir.join(format!("frame_{:06}.png", msg.frame_sequence));
-        crate::pose_overlay::write(&path, &k, &self.rgb, labels, &poses, &self.objects)?;
+        crate::pose_overlay::write(&path, &k, &self.rgb, tint, &poses, &self.objects)?;
         Ok(Some(path))
+    }
+}
+
+/// The instance of `class` (among `instances`, ids in `ids`, rows `width`
+/// long) holding the most pixels inside `bbox` ([u_min, v_min, u_max, v_max],
+/// inclusive): the producer's instance a pose's mask came from. `None`
+/// without an instance plane or when none of the class lies in the box.
+fn instance_in_box(ids: &[u32], width: usize, instances: &[(u32, u16)], class: u16, bbox: [u16; 4]) -> Option<u32> {
+    if instances.is_empty() || width == 0 {
+        return None;
+    }
+    let height = ids.len() / width;
+    let [u0, v0, u1, v1] = bbox.map(usize::from);
+    if u0 > u1 || v0 > v1 || u0 >= width {
+        return None;
+    }
+    let mut counts: Vec<(u32, usize)> =
+        instances.iter().filter(|&&(_, c)| c == class).map(|&(id, _)| (id, 0)).collect();
+    for v in v0..=v1.min(height.saturating_sub(1)) {
+        for &id in &ids[v * width + u0..v * width + (u1 + 1).min(width)] {
+            if let Some(c) = counts.iter_mut().find(|(i, _)| *i == id) {
+                c.1 += 1;
+            }
+        }
+    }
+    counts.into_iter().filter(|&(_, n)| n > 0).max_by_key(|&(_, n)| n).map(|(id, _)| id)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::instance_in_box;
+
+    #[test]
+    fn a_pose_takes_the_instance_of_its_class_filling_its_box() {
+        // 4x2 plane: id 1 (class 3) on the left, id 2 (class 3) on the right, id 4 (class 5) bottom-right.
+        let ids = [1, 1, 2, 2, 1, 2, 2, 4];
+        let instances = [(1, 3), (2, 3), (4, 5)];
+        assert_eq!(instance_in_box(&ids, 4, &instances, 3, [0, 0, 1, 1]), Some(1));
+        assert_eq!(instance_in_box(&ids, 4, &instances, 3, [1, 0, 3, 1]), Some(2));
+        assert_eq!(instance_in_box(&ids, 4, &instances, 5, [0, 0, 3, 1]), Some(4));
+        // No instance of the class in the box, or no instance plane at all.
+        assert_eq!(instance_in_box(&ids, 4, &instances, 5, [0, 0, 1, 1]), None);
+        assert_eq!(instance_in_box(&ids, 4, &[], 3, [0, 0, 3, 1]), None);
+        // A box past the frame is clipped, an inverted one ignored, not a panic.
+        assert_eq!(instance_in_box(&ids, 4, &instances, 3, [2, 1, 900, 900]), Some(2));
+        assert_eq!(instance_in_box(&ids, 4, &instances, 3, [3, 1, 1, 0]), None);
+        assert_eq!(instance_in_box(&ids, 4, &instances, 3, [7, 0, 9, 1]), None);
     }
 }

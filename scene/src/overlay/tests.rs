@@ -143,6 +143,49 @@ fn label_tint_blends_labelled_pixels_only() {
 }
 
 #[test]
+fn touching_copies_get_their_own_shades_and_a_white_line_between_them() {
+    // A 6x3 plane: two touching instances of class 2 (ids 7 and 9), one of
+    // class 4 (id 3) apart from them, and id 5 unlisted (left as it is).
+    #[rustfmt::skip]
+    let ids: [u32; 18] = [
+        7, 7, 9, 9, 0, 3,
+        7, 7, 9, 9, 0, 3,
+        0, 0, 0, 0, 0, 5,
+    ];
+    let mut img = RgbImage::from_pixel(6, 3, Rgb([100, 100, 100]));
+    let colours = tint_instances(&mut img, &ids, &[(7, 2), (9, 2), (3, 4)], 1.0).unwrap();
+    // The first copy of a class keeps the class colour; the second is another shade of it.
+    assert_eq!(colours, vec![label_colour(2), instance_colour(2, 1), label_colour(4)]);
+    assert_ne!(colours[0], colours[1]);
+    assert_eq!(img.get_pixel(0, 0).0, colours[0]);
+    assert_eq!(img.get_pixel(3, 1).0, colours[1]);
+    // Where the copies meet (columns 1 and 2), a white line; none where an
+    // instance meets the background or the unlisted id.
+    for v in 0..2 {
+        assert_eq!(img.get_pixel(1, v).0, INSTANCE_BORDER);
+        assert_eq!(img.get_pixel(2, v).0, INSTANCE_BORDER);
+    }
+    assert_eq!(img.get_pixel(5, 1).0, colours[2]);
+    assert_eq!(img.get_pixel(4, 0).0, [100, 100, 100]);
+    assert_eq!(img.get_pixel(5, 2).0, [100, 100, 100]);
+    assert!(matches!(tint_instances(&mut img, &ids[1..], &[], 0.5), Err(OverlayError::PlaneSize { .. })));
+}
+
+#[test]
+fn a_heap_of_copies_gets_distinct_shades_before_they_repeat() {
+    for class in 1..=8u16 {
+        let shades: Vec<[u8; 3]> = (0..INSTANCE_SHADES).map(|k| instance_colour(class, k)).collect();
+        for (i, a) in shades.iter().enumerate() {
+            for b in &shades[i + 1..] {
+                let d: i32 = a.iter().zip(b).map(|(&x, &y)| (x as i32 - y as i32).abs()).sum();
+                assert!(d >= 30, "class {class}: shades {a:?} and {b:?} too alike");
+            }
+        }
+        assert_eq!(instance_colour(class, INSTANCE_SHADES), shades[0]);
+    }
+}
+
+#[test]
 fn poses_behind_the_camera_or_not_finite_draw_nothing() {
     let set = builtin_objects();
     let k = k_small();
