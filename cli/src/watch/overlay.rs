@@ -174,7 +174,74 @@ fn instance_in_box(ids: &[u32], width: usize, instances: &[(u32, u16)], class: u
 
 #[cfg(test)]
 mod tests {
-    use super::instance_in_box;
+    use super::*;
+    use fusepose_client::{DepthFormat, FrameLayout, LabelFormat};
+    use fusepose_scene::builtin::builtin_objects;
+    use fusepose_scene::overlay::{INSTANCE_BORDER, instance_colour};
+
+    #[test]
+    fn a_frames_instance_plane_is_tinted_per_copy_and_each_pose_takes_its_copys_shade() {
+        // Two copies of class 3 side by side in the frame's instance plane
+        // (ids 1 and 2, meeting at u = 80), posed at x = -/+ 6 cm, 0.5 m away.
+        let (w, h) = (160usize, 120usize);
+        let layout = FrameLayout {
+            width: w as u32,
+            height: h as u32,
+            color_format: ColorFormat::Rgb8,
+            depth_format: DepthFormat::U16,
+            depth_scale: 0.001,
+            labels: Some(LabelFormat::InstanceU16 { max_instances: 3 }),
+        };
+        let mut header = layout.header(0);
+        (header.sequence, header.fx, header.fy, header.cx, header.cy) = (42, 300.0, 300.0, 80.0, 60.0);
+        let mut payload = vec![0u8; layout.payload_len()];
+        let [color, depth, labels] = layout.planes();
+        payload[color.offset as usize..(color.offset + color.len) as usize].fill(90);
+        for d in payload[depth.offset as usize..(depth.offset + depth.len) as usize].chunks_exact_mut(2) {
+            d.copy_from_slice(&500u16.to_ne_bytes());
+        }
+        let id_at = |p: usize| {
+            if p / w < 30 || p / w > 90 {
+                0u16
+            } else if p % w < 80 {
+                1
+            } else {
+                2
+            }
+        };
+        for (p, l) in
+            payload[labels.offset as usize..(labels.offset + labels.len) as usize].chunks_exact_mut(2).enumerate()
+        {
+            l.copy_from_slice(&id_at(p).to_ne_bytes());
+        }
+        let table = layout.instance_classes();
+        for (i, c) in [0u16, 3, 3, 0].iter().enumerate() {
+            let at = table.offset as usize + 2 * i;
+            payload[at..at + 2].copy_from_slice(&c.to_ne_bytes());
+        }
+        let mut msg = PoseMessage { camera_id: 0, frame_sequence: 42, object_count: 2, ..PoseMessage::default() };
+        for (o, (x, bbox)) in msg.objects.iter_mut().zip([(-0.06, [0, 30, 79, 90]), (0.06, [80, 30, 159, 90])]) {
+            (o.class_id, o.bbox, o.quaternion, o.translation_m) = (3, bbox, [0.0, 0.0, 0.0, 1.0], [x, 0.0, 0.5]);
+        }
+        // The daemon's instance ids are its own: the pose on the right comes first.
+        msg.objects.swap(0, 1);
+        let dir = std::env::temp_dir().join(format!("fusepose_watch_overlay_{}", std::process::id()));
+        let mut writer = OverlayWriter::new(&dir, builtin_objects(), None).unwrap();
+        writer.push(header, &payload);
+        let path = writer.write(&msg).unwrap().expect("the frame is held");
+        let img = image::open(&path).unwrap().to_rgb8();
+        let count = |c: [u8; 3]| img.pixels().filter(|p| p.0 == c).count();
+        let (first, second) = (instance_colour(3, 0), instance_colour(3, 1));
+        assert!(count(first) > 20 && count(second) > 20, "each pose outlined in its copy's shade");
+        // The left pose (instance 1, the first shade) is outlined left of the
+        // line between the copies, the right one right of it.
+        let cols =
+            |c: [u8; 3]| img.enumerate_pixels().filter(|(_, _, p)| p.0 == c).map(|(u, _, _)| u).collect::<Vec<_>>();
+        assert!(cols(first).iter().all(|&u| u < 80) && cols(second).iter().all(|&u| u >= 80));
+        let line = img.enumerate_pixels().filter(|(u, _, p)| (79..=80).contains(u) && p.0 == INSTANCE_BORDER).count();
+        assert!(line >= 100, "{line} white pixels where the copies meet");
+        std::fs::remove_dir_all(&dir).ok();
+    }
 
     #[test]
     fn a_pose_takes_the_instance_of_its_class_filling_its_box() {
