@@ -598,9 +598,11 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
                     instance: ws.component_id(p.instance_id as usize),
                 })
                 .collect();
-            let tint = match ws.component_ids().len() == frame.labels.len() {
-                true => Tint::Instances { ids: ws.component_ids(), instances: &instances },
-                false => Tint::Classes(&frame.labels),
+            // A frame the workspace could not prepare has no regions: its labels then.
+            let tint = if ws.component_ids().len() == frame.labels.len() {
+                Tint::Instances { ids: ws.component_ids(), instances: &instances }
+            } else {
+                Tint::Classes(&frame.labels)
             };
             let path = dir.join(format!("{:06}_{:06}.png", frame.scene_id, frame.im_id));
             crate::pose_overlay::write(&path, &frame.intrinsics, &frame.rgb, tint, &poses, &objects)?;

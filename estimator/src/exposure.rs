@@ -204,8 +204,7 @@ impl AutoExposure {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::{ColorFormat, DepthPlane};
-    use fusepose_scene::Intrinsics;
+    use crate::frame::{ColorFormat, test_view};
 
     /// A frame-sized colour plane: a dark table with a few lit patches.
     fn scene(width: usize, height: usize, exposure: f64) -> Vec<u8> {
@@ -222,20 +221,7 @@ mod tests {
     }
 
     fn view<'a>(rgb: &'a [u8], depth: &'a [f32], w: usize, h: usize) -> FrameView<'a> {
-        FrameView {
-            intrinsics: Intrinsics {
-                fx: 500.0,
-                fy: 500.0,
-                cx: w as f64 / 2.0,
-                cy: h as f64 / 2.0,
-                width: w as u32,
-                height: h as u32,
-            },
-            color_format: ColorFormat::Rgb8,
-            color: rgb,
-            depth: DepthPlane::F32(depth),
-            labels: None,
-        }
+        test_view(rgb, depth, w, h, ColorFormat::Rgb8)
     }
 
     #[test]

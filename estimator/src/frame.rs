@@ -336,6 +336,33 @@ impl FrameError {
     }
 }
 
+/// A `w` x `h` view of `colour` and metric `depth`, without labels, seen
+/// through a 500-pixel focal length centred on the image: the frame the
+/// colour stages' unit tests ([`crate::exposure`], [`crate::white_balance`]) run on.
+#[cfg(test)]
+pub(crate) fn test_view<'a>(
+    colour: &'a [u8],
+    depth: &'a [f32],
+    w: usize,
+    h: usize,
+    format: ColorFormat,
+) -> FrameView<'a> {
+    FrameView {
+        intrinsics: Intrinsics {
+            fx: 500.0,
+            fy: 500.0,
+            cx: w as f64 / 2.0,
+            cy: h as f64 / 2.0,
+            width: w as u32,
+            height: h as u32,
+        },
+        color_format: format,
+        color: colour,
+        depth: DepthPlane::F32(depth),
+        labels: None,
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

@@ -214,8 +214,7 @@ fn rgb_index(format: ColorFormat) -> [usize; 3] {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::frame::DepthPlane;
-    use fusepose_scene::Intrinsics;
+    use crate::frame::test_view as view;
 
     /// A scene of grey, red and blue patches under light of linear colour `light`.
     fn scene(width: usize, height: usize, light: [f64; 3]) -> Vec<u8> {
@@ -233,23 +232,6 @@ mod tests {
             }
         }
         rgb
-    }
-
-    fn view<'a>(colour: &'a [u8], depth: &'a [f32], w: usize, h: usize, format: ColorFormat) -> FrameView<'a> {
-        FrameView {
-            intrinsics: Intrinsics {
-                fx: 500.0,
-                fy: 500.0,
-                cx: w as f64 / 2.0,
-                cy: h as f64 / 2.0,
-                width: w as u32,
-                height: h as u32,
-            },
-            color_format: format,
-            color: colour,
-            depth: DepthPlane::F32(depth),
-            labels: None,
-        }
     }
 
     /// A strongly warm light: ln(R/G) = +0.36, ln(B/G) = −0.44 on neutral
