@@ -37,6 +37,7 @@ mod dataset;
 mod instances;
 mod masks;
 mod per_object;
+mod pseudo;
 mod variants;
 
 use std::collections::BTreeMap;
@@ -178,6 +179,13 @@ pub struct Args {
     /// their instance's shade.
     #[arg(long)]
     pub overlay: Option<PathBuf>,
+    /// Write pseudo-labels for the segmenter's adaptation to this folder: each
+    /// frame's published poses rendered and confirmed by its depth, the table
+    /// as background, the rest unknown (no ground truth is read). Needs
+    /// `--masks net` (last), one seed and no cast; train on them with `fusepose
+    /// train --stage seg --adapt-labels DIR`.
+    #[arg(long)]
+    pub pseudo_labels: Option<PathBuf>,
     /// Object set: `builtin` or a mesh folder (default: the one the dataset names, else builtin).
     #[arg(long)]
     pub objects: Option<String>,
@@ -454,6 +462,14 @@ fn cast_arg() -> impl clap::builder::TypedValueParser<Value = Cast> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if args.pseudo_labels.is_some() {
+        let casts = args.cast.iter().filter(|&&c| c != Cast::None).count();
+        if args.seeds > 1 || casts > 0 || args.masks.last() != Some(&MaskSource::Net) {
+            anyhow::bail!(
+                "--pseudo-labels labels the frames as they came: give `--masks net` (last), one seed and no --cast"
+            );
+        }
+    }
     if let Some(path) = &args.odds_samples {
         // Once for every seed and cast: each run appends its samples.
         let header = fusepose_estimator::pose_odds::samples_header() + "\n";
@@ -557,6 +573,10 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     bar.set_prefix(runners.iter().map(|r| r.name.clone()).collect::<Vec<_>>().join(","));
     let mut auto_exposure = args.auto_exposure.0.map(fusepose_estimator::exposure::AutoExposure::new);
     let mut white_balance = args.white_balance.0.map(fusepose_estimator::white_balance::WhiteBalance::new);
+    let mut pseudo = match &args.pseudo_labels {
+        Some(dir) => Some(pseudo::PseudoLabeller::create(dir, &data.split_dir()?, &objects)?),
+        None => None,
+    };
     for index in 0..frames {
         let mut frame = data.load(index, objects.len() as u16).with_context(|| format!("loading frame {index}"))?;
         let colour_cast = args.cast.first().copied().unwrap_or(Cast::None);
@@ -607,9 +627,16 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
             let path = dir.join(format!("{:06}_{:06}.png", frame.scene_id, frame.im_id));
             crate::pose_overlay::write(&path, &frame.intrinsics, &frame.rgb, tint, &poses, &objects)?;
         }
+        if let (Some(labeller), Some(seg), Some(last)) = (pseudo.as_mut(), net_masks.as_ref(), runners.last()) {
+            labeller.add(&frame, &seg.class_labels, last.poses.as_slice(), &objects)?;
+        }
         bar.inc(1);
     }
     bar.finish_and_clear();
+    if let Some(labeller) = pseudo {
+        let dir = labeller.finish()?;
+        println!("wrote pseudo-labels to {}", dir.display());
+    }
     if let Some(dir) = &args.overlay {
         println!("wrote {frames} overlays to {}", dir.display());
     }

@@ -11,6 +11,7 @@ mod demo;
 mod eval;
 mod objects;
 mod pose_overlay;
+mod record;
 mod render;
 mod stats;
 mod train;
@@ -37,6 +38,8 @@ enum Command {
     Watch(watch::Args),
     /// Query fuseposed for its latency histograms and counters.
     Stats(stats::Args),
+    /// Keep a camera's frames as a BOP split without ground truth (to adapt the segmenter to it).
+    Record(record::Args),
     /// Render a synthetic BOP dataset of tabletop scenes.
     Render(render::Args),
     /// Inspect or export object sets.
@@ -64,6 +67,7 @@ fn main() {
         Command::Camera(a) => camera::run(a),
         Command::Watch(a) => watch::run(a),
         Command::Stats(a) => stats::run(a),
+        Command::Record(a) => record::run(a),
         Command::Render(a) => render::run(a),
         Command::Objects(a) => objects::run(a),
         Command::Train(a) => train::run(*a),

@@ -202,7 +202,8 @@ pub fn scene_seed(seed: u64, split: Split, index: u64) -> u64 {
     splitmix64(splitmix64(splitmix64(seed) ^ split.tag()) ^ index)
 }
 
-fn object_source(objects: &str) -> ObjectSource {
+/// The object set `objects` names, a mesh folder made absolute (datasets record it).
+pub(crate) fn object_source(objects: &str) -> ObjectSource {
     match objects.parse::<ObjectSource>() {
         Ok(ObjectSource::Directory(p)) => ObjectSource::Directory(std::fs::canonicalize(&p).unwrap_or(p)),
         Ok(s) => s,

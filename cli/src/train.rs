@@ -170,6 +170,14 @@ pub struct Args {
     /// linear light (white balance, tint, exposure, noise; 0 = none).
     #[arg(long, default_value_t = 0.0, value_parser = crate::render::probability)]
     pub seg_cast: f64,
+    /// `--stage seg`: adapt the segmenter to a camera with pseudo-labelled
+    /// frames of it (folders written by `fusepose eval --pseudo-labels DIR`,
+    /// comma-separated), mixed with the rendered scenes.
+    #[arg(long, value_delimiter = ',')]
+    pub adapt_labels: Vec<PathBuf>,
+    /// `--stage seg`: share of training frames drawn from `--adapt-labels`.
+    #[arg(long, default_value_t = 0.5, value_parser = crate::render::probability)]
+    pub adapt_share: f64,
     /// `--stage seg`: train the centre-offset head (`false` keeps a resumed
     /// file without one as it is, e.g. to fine-tune the shipped segmenter).
     #[arg(long, default_value_t = true, action = clap::ArgAction::Set)]

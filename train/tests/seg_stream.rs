@@ -17,7 +17,7 @@ fn three_data_threads_deliver_the_frames_of_one_in_seed_order() {
     let sampler = SamplerConfig::training();
     let first = 0x5e90_0000_0000 + 17;
     let take = |threads: usize| {
-        let mut s = SegStream::spawn(set.clone(), cfg.clone(), sampler.clone(), 0.5, first, 4, threads).unwrap();
+        let mut s = SegStream::spawn(set.clone(), cfg.clone(), sampler.clone(), 0.5, first, 4, threads, None).unwrap();
         (0..5).map(|_| s.recv_timeout(Duration::from_secs(60)).unwrap()).collect::<Vec<_>>()
     };
     let one = take(1);

@@ -63,6 +63,17 @@ impl EvalDataset {
         Ok(EvalDataset::Bop(bop))
     }
 
+    /// The BOP split folder the frames come from (absolute when it can be);
+    /// an error for YCB-Video, which `--pseudo-labels` does not take.
+    pub fn split_dir(&self) -> anyhow::Result<std::path::PathBuf> {
+        match self {
+            EvalDataset::Bop(b) => {
+                Ok(std::fs::canonicalize(b.split_dir()).unwrap_or_else(|_| b.split_dir().to_path_buf()))
+            }
+            EvalDataset::Ycb { .. } => anyhow::bail!("--pseudo-labels needs a BOP split, not YCB-Video"),
+        }
+    }
+
     /// The object set the dataset names (`builtin` or a mesh folder), if any.
     pub fn object_source(&self) -> Option<String> {
         match self {

@@ -161,6 +161,8 @@ pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
         contacts: args.seg_contacts,
         widen: widths,
         device: args.device,
+        adapt_labels: args.adapt_labels.clone(),
+        adapt_share: args.adapt_share,
         ..SegTrainConfig::default()
     };
     let report = train_segmenter(cfg)?;

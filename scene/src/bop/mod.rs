@@ -25,12 +25,17 @@ mod json;
 mod manifest;
 mod model_ply;
 mod models_info;
+mod pseudo_labels;
 mod reader;
 mod writer;
 
 pub use error::BopError;
 pub use manifest::{ClassEntry, DatasetManifest, MANIFEST_FILE, ObjectSource};
 pub use models_info::{BopModelInfo, BopSymmetry, read_models_info};
+pub use pseudo_labels::{
+    PSEUDO_MANIFEST_FILE, PseudoLabelFrame, PseudoLabelManifest, PseudoLabelWriter, UNKNOWN_LABEL, read_pseudo_labels,
+    read_pseudo_manifest,
+};
 pub use reader::{BopDataset, BopFrame, BopGt, FrameId};
 pub use writer::{BopWriter, FrameToWrite, InstanceToWrite};
 

@@ -186,18 +186,10 @@ pub fn frame_sample(
     let mut input = vec![0.0; map.input_len()];
     let mut cells = vec![0u16; map.cells()];
     let (offsets, offset_mask, contacts) = if augment && rng.random_bool(0.5) {
-        // Horizontal flip of the full-resolution frame, so input and target stay aligned exactly.
         let mut color = target.rgb().to_vec();
         let mut depth = target.depth_m().to_vec();
         let mut labels = target.labels().to_vec();
-        for row in color.chunks_exact_mut(3 * w) {
-            row.reverse();
-            for px in row.chunks_exact_mut(3) {
-                px.reverse();
-            }
-        }
-        depth.chunks_exact_mut(w).for_each(<[f32]>::reverse);
-        labels.chunks_exact_mut(w).for_each(<[u16]>::reverse);
+        flip_rows(&mut color, &mut depth, &mut labels, w);
         let frame = FrameView { color: &color, depth: DepthPlane::F32(&depth), ..frame_view(k, target) };
         map.fill_input(&frame, &mut input);
         cell_targets(&map, &labels, &lut, &mut cells)
@@ -210,6 +202,19 @@ pub fn frame_sample(
         jitter_colour(&mut s, cfg, &mut rng);
     }
     Ok(Some(s))
+}
+
+/// Mirrors a full-resolution frame `w` pixels wide left to right (RGB8
+/// colour, depth, labels), so that input and target stay aligned exactly.
+pub fn flip_rows(color: &mut [u8], depth: &mut [f32], labels: &mut [u16], w: usize) {
+    for row in color.chunks_exact_mut(3 * w) {
+        row.reverse();
+        for px in row.chunks_exact_mut(3) {
+            px.reverse();
+        }
+    }
+    depth.chunks_exact_mut(w).for_each(<[f32]>::reverse);
+    labels.chunks_exact_mut(w).for_each(<[u16]>::reverse);
 }
 
 /// A camera's colour rendition unlike the renderer's, in linear light on the
@@ -270,6 +275,10 @@ pub struct SegStream(SeededWorkers<SegSample>);
 
 impl SegStream {
     /// Renders scenes `first_seed, first_seed + 1, …` (augmented) until dropped.
+    ///
+    /// With `adapt` = (frames, share), that share of the seeds draws a
+    /// pseudo-labelled frame instead ([`super::adapt`]).
+    #[allow(clippy::too_many_arguments)]
     pub fn spawn(
         set: Arc<ObjectSet>,
         cfg: SegConfig,
@@ -278,6 +287,7 @@ impl SegStream {
         first_seed: u64,
         capacity: usize,
         threads: usize,
+        adapt: Option<(Arc<super::adapt::AdaptFrames>, f64)>,
     ) -> anyhow::Result<Self> {
         let camera = render_camera(&sampler);
         let workers = SeededWorkers::spawn(
@@ -286,7 +296,15 @@ impl SegStream {
             first_seed,
             capacity,
             move || Ok(RenderTarget::for_intrinsics(&camera)),
-            move |target, seed| frame_sample(&set, &cfg, &sampler, seed, true, cast, target),
+            move |target, seed| {
+                if let Some((frames, share)) = &adapt {
+                    let mut rng = Pcg64::seed_from_u64(seed ^ 0xada9_7ed0);
+                    if rng.random_bool(share.clamp(0.0, 1.0)) {
+                        return Ok(Some(frames.sample(&cfg, cast, &mut rng)));
+                    }
+                }
+                frame_sample(&set, &cfg, &sampler, seed, true, cast, target)
+            },
         )?;
         Ok(Self(workers))
     }

@@ -7,6 +7,8 @@
 use burn::prelude::{Int, Tensor, TensorData};
 use burn::tensor::activation::{log_sigmoid, log_softmax};
 
+pub use super::adapt::IGNORE;
+
 /// Per-class weights `(1 / freq_c)^power` from pixel counts (one per output
 /// channel, background first), scaled so the pixel-weighted mean is 1; every
 /// class gets at least one pseudo-count and the ratio of largest to smallest
@@ -73,7 +75,8 @@ pub fn small_region_weights(target: &[u16], w: usize, h: usize, reference_cells:
     out
 }
 
-/// Weighted cross-entropy: `-Σ w[t_i] log softmax(logits)_i[t_i] / Σ w[t_i]` over all cells.
+/// Weighted cross-entropy: `-Σ w[t_i] log softmax(logits)_i[t_i] / Σ w[t_i]` over all cells
+/// but those of class [`IGNORE`].
 /// `logits [B, C, H, W]`, `target` `B*H*W` class ids (`< C`), `weights` `C` values.
 pub fn weighted_cross_entropy(logits: Tensor<4>, target: &[u16], weights: &[f32]) -> Tensor<1> {
     weighted_cross_entropy_scaled(logits, target, weights, None)
@@ -89,11 +92,18 @@ pub fn weighted_cross_entropy_scaled(
 ) -> Tensor<1> {
     let [b, _, h, w] = logits.dims();
     let device = logits.device();
+    // Cells of unknown class (pseudo-labels) gather class 0 at weight 0.
     let idx = Tensor::<4, Int>::from_data(
-        TensorData::new(target.iter().map(|&t| t as i64).collect::<Vec<_>>(), [b, 1, h, w]),
+        TensorData::new(
+            target.iter().map(|&t| if t == IGNORE { 0 } else { t as i64 }).collect::<Vec<_>>(),
+            [b, 1, h, w],
+        ),
         &device,
     );
-    let mut pw: Vec<f32> = target.iter().map(|&t| weights.get(t as usize).copied().unwrap_or(1.0)).collect();
+    let mut pw: Vec<f32> = target
+        .iter()
+        .map(|&t| if t == IGNORE { 0.0 } else { weights.get(t as usize).copied().unwrap_or(1.0) })
+        .collect();
     if let Some(scale) = scale {
         pw.iter_mut().zip(scale).for_each(|(p, s)| *p *= s);
     }
@@ -189,6 +199,20 @@ mod tests {
         let loss = weighted_cross_entropy_scaled(l, &[1, 0], &[1.0, 3.0], Some(&[2.0, 1.0]));
         let v = loss.into_data().try_to_vec::<f32>().unwrap()[0];
         let expect = -(6.0 * (0.75f32).ln() + (0.5f32).ln()) / 7.0;
+        assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
+    }
+
+    #[test]
+    fn cells_of_unknown_class_take_no_loss() {
+        let device = Device::flex();
+        // Cells 0 and 1 as in the hand computation above; cell 2 unknown, with a logit that would cost a lot.
+        let l = Tensor::<4>::from_data(
+            TensorData::new(vec![0.0f32, 0.0, 40.0, 3f32.ln(), 0.0, -40.0], [1, 2, 1, 3]),
+            &device,
+        );
+        let loss = weighted_cross_entropy(l, &[1, 0, IGNORE], &[1.0, 3.0]);
+        let v = loss.into_data().try_to_vec::<f32>().unwrap()[0];
+        let expect = -(3.0 * (0.75f32).ln() + (0.5f32).ln()) / 4.0;
         assert!((v - expect).abs() < 1e-5, "{v} vs {expect}");
     }
 

@@ -3,8 +3,10 @@
 //! cross-entropy), [`data`] (frames rendered on the fly, augmentation),
 //! [`store`] (weight files and checkpoints), [`validate`] (held-out mIoU and
 //! per-class IoU through the engine), [`certainty`] (how sure it is of real
-//! objects, stored for the verifier), [`trainer`] (the loop).
+//! objects, stored for the verifier), [`adapt`] (pseudo-labelled frames of
+//! the camera it will serve), [`trainer`] (the loop).
 
+pub mod adapt;
 pub mod certainty;
 pub mod data;
 pub mod loss;

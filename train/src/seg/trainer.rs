@@ -21,6 +21,7 @@ use fusepose_estimator::seg::{SegConfig, SegEngine};
 use fusepose_scene::ObjectSet;
 use fusepose_scene::builtin::builtin_objects;
 
+use super::adapt::AdaptFrames;
 use super::data::{SegSample, SegStream};
 use super::loss::{class_weights, contact_bce, offset_l1, small_region_weights, weighted_cross_entropy_scaled};
 use super::model::SegNet;
@@ -103,6 +104,10 @@ pub struct SegTrainConfig {
     pub data_threads: usize,
     /// Where the network trains ([`crate::device`]).
     pub device: crate::device::TrainDevice,
+    /// Pseudo-label folders of the camera to adapt to ([`super::adapt`]); empty = none.
+    pub adapt_labels: Vec<PathBuf>,
+    /// Share of training frames drawn from them.
+    pub adapt_share: f64,
 }
 
 impl Default for SegTrainConfig {
@@ -138,6 +143,8 @@ impl Default for SegTrainConfig {
             cast_augment: 0.0,
             data_threads: crate::seeded_workers::default_threads(),
             device: crate::device::TrainDevice::Cpu,
+            adapt_labels: Vec::new(),
+            adapt_share: 0.5,
         }
     }
 }
@@ -382,6 +389,24 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
 
     // Training scenes: far from the pose trainer's and the validation seeds; a resume continues.
     let first_seed = 0x5e90_0000_0000 + (cfg.seed % 1000) * 1_000_000_000 + record.samples + 1;
+    let adapt = if cfg.adapt_labels.is_empty() {
+        None
+    } else {
+        let frames = AdaptFrames::load(&cfg.adapt_labels, set.len())?;
+        log.line(&format!(
+            "# adapting: {} pseudo-labelled frames from {:?}, {:.0} % of the frames",
+            frames.len(),
+            cfg.adapt_labels,
+            100.0 * cfg.adapt_share
+        ));
+        record.data += &format!(
+            "; {:.0} % pseudo-labelled frames ({} from {})",
+            100.0 * cfg.adapt_share,
+            frames.len(),
+            cfg.adapt_labels.iter().map(|p| p.display().to_string()).collect::<Vec<_>>().join(", ")
+        );
+        Some((Arc::new(frames), cfg.adapt_share))
+    };
     let mut stream = SegStream::spawn(
         set.clone(),
         arch.clone(),
@@ -390,6 +415,7 @@ pub fn train_segmenter(cfg: SegTrainConfig) -> anyhow::Result<SegTrainReport> {
         first_seed,
         4 * cfg.batch,
         cfg.data_threads,
+        adapt,
     )?;
 
     // Class weights from the first frames (those frames are trained on too).
@@ -552,7 +578,7 @@ mod tests {
     fn a_frame_slower_than_the_wait_is_waited_for() {
         let set = Arc::new(builtin_objects());
         let sampler = fusepose_scene::sampler::SamplerConfig::training();
-        let mut stream = SegStream::spawn(set.clone(), SegConfig::new(set.len()), sampler, 0.0, 1, 2, 1).unwrap();
+        let mut stream = SegStream::spawn(set.clone(), SegConfig::new(set.len()), sampler, 0.0, 1, 2, 1, None).unwrap();
         // A rendered frame takes tens of milliseconds: every wait of 1 ms times out first.
         let s = recv_patiently(&mut stream, Duration::from_millis(1)).unwrap();
         assert!(!s.input.is_empty());
