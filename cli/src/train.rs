@@ -384,6 +384,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             args.objects
         );
     }
+    if !args.adapt_labels.is_empty() && !matches!(args.stage(), StageArg::Seg) {
+        anyhow::bail!("--adapt-labels adapts the segmenter: give it with --stage seg");
+    }
     if matches!(args.stage(), StageArg::Odds) {
         return fit_odds(&args.odds_samples, &args.odds_without, &args.out);
     }

@@ -6,14 +6,15 @@
 //!
 //! Each published pose's model is rendered at its pose. A pixel takes the
 //! pose's class where the model covers it and the measured depth lies within
-//! 1 cm + 1 % of the model's. It is background where no pose covers it, the
-//! segmenter saw no object there and its point lies on the support plane
-//! (fitted to the segmenter's background). Everywhere else it is unknown and
-//! teaches nothing: pixels a pose covers but the depth does not confirm (an
-//! occluder no pose explains, a slightly wrong pose), object regions of the
-//! segmenter that no published pose explains (a missed copy or a ghost: the
-//! labels must teach neither), and points off the plane that no pose explains
-//! (walls, other things, objects nobody posed).
+//! 1 cm + 1 % of the model's. It is background where no pose covers it and
+//! its point lies on the support plane (fitted to the segmenter's
+//! background), also where the segmenter saw an object there: a patch of
+//! table that took a class is the ghost the segmenter should unlearn.
+//! Everywhere else it is unknown and teaches nothing: pixels a pose covers
+//! but the depth does not confirm (an occluder no pose explains, a slightly
+//! wrong pose), and points off the plane that no pose explains (a copy nobody
+//! posed, walls, other things): a missed object must not be taught as
+//! background.
 
 use std::path::{Path, PathBuf};
 
@@ -86,9 +87,7 @@ pub fn pseudo_labels(inputs: &LabelInputs<'_>, out: &mut Vec<u8>) {
                 _ => UNKNOWN_LABEL,
             };
         }
-        if inputs.segmenter[p] != 0 {
-            return UNKNOWN_LABEL;
-        }
+        // On the table it is background, whatever the segmenter saw there.
         match (z, &plane) {
             (Some(z), Some(plane)) if plane.height(&point(p, z)).abs() <= ON_PLANE_M => 0,
             _ => UNKNOWN_LABEL,
@@ -207,7 +206,8 @@ mod tests {
 
     /// A 40x30 frame looking straight down at a table 1 m away: a posed box
     /// (item 1, class 2) over x 5..15, an unexplained segmenter region of
-    /// class 4 over x 25..30, a wall-like patch off the plane at x 32..36.
+    /// class 4 standing 5 cm off the table at x 25..30, a table patch the
+    /// segmenter gave class 5, a wall-like patch off the plane at x 32..36.
     #[test]
     fn labels_follow_confirmed_poses_the_table_and_nothing_else() {
         let k = Intrinsics { fx: 40.0, fy: 40.0, cx: 19.5, cy: 14.5, width: 40, height: 30 };
@@ -230,6 +230,10 @@ mod tests {
                 depth[p] = 0.95;
                 seg[p] = 4;
             }
+            // A patch of table the segmenter took for class 5.
+            if (20..24).contains(&u) && (20..25).contains(&v) {
+                seg[p] = 5;
+            }
             if (32..36).contains(&u) {
                 depth[p] = 0.7;
             }
@@ -248,7 +252,8 @@ mod tests {
         let at = |u: usize, v: usize| out[v * 40 + u];
         assert_eq!(at(8, 8), 2, "a confirmed pose's pixel takes its class");
         assert_eq!(at(14, 8), UNKNOWN_LABEL, "depth that does not confirm the pose: unknown");
-        assert_eq!(at(27, 8), UNKNOWN_LABEL, "a segmenter region no pose explains is not taught");
+        assert_eq!(at(27, 8), UNKNOWN_LABEL, "an object no pose explains is not taught as background");
+        assert_eq!(at(22, 22), 0, "a table patch the segmenter took for an object is background");
         assert_eq!(at(34, 20), UNKNOWN_LABEL, "off the table, unexplained: unknown");
         assert_eq!(at(20, 25), 0, "the table is background");
         assert_eq!(at(39, 29), UNKNOWN_LABEL, "no depth: unknown");

@@ -99,7 +99,10 @@ pub fn calibrate_file(set: &ObjectSet, args: &Args, path: &Path) -> anyhow::Resu
 
 pub fn run(set: ObjectSet, args: &Args) -> anyhow::Result<()> {
     if args.dataset.is_some() {
-        bail!("--stage seg trains on rendered scenes only; --dataset is not supported");
+        bail!(
+            "--stage seg trains on rendered scenes, and with --adapt-labels on pseudo-labelled frames; --dataset is not \
+             supported"
+        );
     }
     if args.bench_engine {
         return bench(&set, args.resume.as_deref());
