@@ -4,15 +4,16 @@
 //! `IGNORE`, which the loss skips), and a stream with the whole share draws
 //! only them; a folder for another object set is refused.
 
+mod common;
+
 use std::sync::Arc;
 use std::time::Duration;
 
 use fusepose_estimator::seg::SegConfig;
 use fusepose_scene::Intrinsics;
-use fusepose_scene::bop::{BopWriter, FrameToWrite, InstanceToWrite, ObjectSource, PseudoLabelWriter, UNKNOWN_LABEL};
+use fusepose_scene::bop::{PseudoLabelWriter, UNKNOWN_LABEL};
 use fusepose_scene::builtin::builtin_objects;
-use fusepose_scene::render::{DEPTH_U16_PER_METRE, NoiseConfig, RenderTarget};
-use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
+use fusepose_scene::sampler::SamplerConfig;
 use fusepose_train::seg::adapt::{AdaptFrames, IGNORE};
 use fusepose_train::seg::data::SegStream;
 use rand::SeedableRng;
@@ -23,30 +24,12 @@ fn pseudo_labels_become_cell_targets_and_unknown_cells_are_ignored() {
     let set = builtin_objects();
     let root = std::env::temp_dir().join(format!("fusepose-adapt-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
-    let mut writer = BopWriter::create(&root, "test", &set, &ObjectSource::Builtin).unwrap();
+    common::write_rendered_split(&root, "test", &set, 2, 70);
     let k = Intrinsics::YCB_VIDEO;
     let (w, h) = (k.width as usize, k.height as usize);
-    let mut target = RenderTarget::for_intrinsics(&k);
     let labels_dir = root.join("pseudo");
     let mut pseudo = PseudoLabelWriter::create(&labels_dir, &root.join("test"), set.len() as u16).unwrap();
     for im in 0..2u32 {
-        let scene = sample_scene(&set, &SamplerConfig::default(), 70 + im as u64).unwrap();
-        let truth =
-            render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Instance, &mut target)
-                .unwrap();
-        let instances = InstanceToWrite::of_truth(&truth);
-        writer
-            .write_frame(&FrameToWrite {
-                scene_id: 0,
-                im_id: im,
-                intrinsics: k,
-                rgb: target.rgb(),
-                depth: target.depth_u16(),
-                depth_unit_m: 1.0 / DEPTH_U16_PER_METRE,
-                instance_labels: target.labels(),
-                instances: &instances,
-            })
-            .unwrap();
         // Labels: class 3 in the left half, unknown in the right half's top, background below it.
         let labels: Vec<u8> = (0..w * h)
             .map(|p| match (p % w < w / 2, p / w < h / 2) {
@@ -57,7 +40,6 @@ fn pseudo_labels_become_cell_targets_and_unknown_cells_are_ignored() {
             .collect();
         pseudo.write_frame(0, im, k.width, k.height, &labels, 1).unwrap();
     }
-    drop(writer);
     pseudo.finish().unwrap();
 
     let frames = AdaptFrames::load(std::slice::from_ref(&labels_dir), set.len()).unwrap();

@@ -3,11 +3,10 @@
 //! right instance (the points sit on the object at its pose), frames with
 //! index % 10 == 0 are held out, and a class-name mismatch is refused.
 
-use fusepose_scene::Intrinsics;
-use fusepose_scene::bop::{BopDataset, BopWriter, FrameToWrite, InstanceToWrite, ObjectSource};
+mod common;
+
+use fusepose_scene::bop::BopDataset;
 use fusepose_scene::builtin::builtin_objects;
-use fusepose_scene::render::{DEPTH_U16_PER_METRE, NoiseConfig, RenderTarget};
-use fusepose_scene::sampler::{LabelKind, SamplerConfig, render_view_labelled, sample_scene};
 use fusepose_train::data::{DataConfig, Source, bop_frame_samples, bop_indices, workspace};
 use nalgebra::Point3;
 
@@ -16,29 +15,7 @@ fn bop_frames_become_samples_matched_to_their_ground_truth() {
     let set = builtin_objects();
     let root = std::env::temp_dir().join(format!("fusepose-bop-src-{}", std::process::id()));
     let _ = std::fs::remove_dir_all(&root);
-    let mut writer = BopWriter::create(&root, "train", &set, &ObjectSource::Builtin).unwrap();
-    let k = Intrinsics::YCB_VIDEO;
-    let mut target = RenderTarget::for_intrinsics(&k);
-    for im in 0..11u32 {
-        let scene = sample_scene(&set, &SamplerConfig::default(), 40 + im as u64).unwrap();
-        let truth =
-            render_view_labelled(&scene, &set, 0, &k, &NoiseConfig::default(), LabelKind::Instance, &mut target)
-                .unwrap();
-        let instances = InstanceToWrite::of_truth(&truth);
-        writer
-            .write_frame(&FrameToWrite {
-                scene_id: 0,
-                im_id: im,
-                intrinsics: k,
-                rgb: target.rgb(),
-                depth: target.depth_u16(),
-                depth_unit_m: 1.0 / DEPTH_U16_PER_METRE,
-                instance_labels: target.labels(),
-                instances: &instances,
-            })
-            .unwrap();
-    }
-    drop(writer);
+    common::write_rendered_split(&root, "train", &set, 11, 40);
     let split = root.join("train");
     let Source::Bop(ds) = Source::bop(&split, &set).unwrap() else { panic!("not a BOP source") };
     assert_eq!(ds.len(), 11);
