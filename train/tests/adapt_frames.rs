@@ -81,5 +81,7 @@ fn pseudo_labels_become_cell_targets_and_unknown_cells_are_ignored() {
 
     let wrong = AdaptFrames::load(std::slice::from_ref(&labels_dir), set.len() + 1).unwrap_err();
     assert!(format!("{wrong:#}").contains("classes"), "{wrong:#}");
+    let missing = AdaptFrames::load(&[root.join("nowhere")], set.len()).unwrap_err();
+    assert!(format!("{missing:#}").contains("fusepose eval --masks net --pseudo-labels"), "{missing:#}");
     let _ = std::fs::remove_dir_all(&root);
 }

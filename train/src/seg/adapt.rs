@@ -99,7 +99,8 @@ impl AdaptFrames {
 }
 
 fn load_folder(dir: &Path, num_classes: usize, out: &mut Vec<AdaptFrame>) -> anyhow::Result<()> {
-    let manifest = read_pseudo_manifest(dir)?;
+    let manifest = read_pseudo_manifest(dir)
+        .context("not a pseudo-label folder: write one with `fusepose eval --masks net --pseudo-labels DIR`")?;
     if manifest.num_classes as usize != num_classes {
         anyhow::bail!("labels are of {} classes, the object set has {num_classes}", manifest.num_classes);
     }
