@@ -23,7 +23,7 @@ use fusepose_estimator::poses::ObjectPose;
 use fusepose_estimator::support;
 use fusepose_scene::bop::{PseudoLabelWriter, UNKNOWN_LABEL};
 use fusepose_scene::render::{RenderItem, RenderSettings, RenderTarget, render_scene};
-use fusepose_scene::{Intrinsics, ObjectSet, Pose};
+use fusepose_scene::{Intrinsics, ObjectSet};
 use nalgebra::Vector3;
 
 use super::dataset::EvalFrame;
@@ -135,7 +135,7 @@ impl PseudoLabeller {
             .filter_map(|(i, p)| {
                 Some(RenderItem {
                     mesh: &objects.by_class(p.class_id)?.mesh,
-                    pose: Pose::from_parts(p.translation.into(), p.rotation),
+                    pose: super::pose_of(p),
                     instance_label: i as u16 + 1,
                     shadow_mesh: None,
                 })
