@@ -28,6 +28,10 @@ Render (run `blender` from any folder; everything after `--` goes to this script
 
     fusepose eval --dataset scratch/pathtraced --estimator icp
 
+Touching copies of one object (issue 24's pairs on images fusepose did not
+render): `--pairs 1` gives every scene a second copy of one of its objects
+beside the first, as `fusepose render --pairs` does.
+
 Check the camera model and the depth convention (prints measured numbers, no files kept):
 
     blender -b -t 1 --factory-startup --python tools/blender/render_bop_split.py -- --self-test
@@ -107,6 +111,9 @@ def parse_args(argv):
     p.add_argument("--seed", type=int, default=190004)
     p.add_argument("--min-objects", type=int, default=5)
     p.add_argument("--max-objects", type=int, default=7)
+    p.add_argument("--pairs", type=float, default=0.0,
+                   help="probability that a scene holds a second copy of one of its objects, side by side with the "
+                        "first (same rest, yaw within 8 degrees, 0.5-3 mm apart), as `fusepose render --pairs`")
     p.add_argument("--samples", type=int, default=48, help="Cycles samples per pixel (adaptive, at most)")
     p.add_argument("--noise-threshold", type=float, default=0.03, help="Cycles adaptive-sampling threshold")
     p.add_argument("--source", default="builtin",
@@ -121,6 +128,8 @@ def parse_args(argv):
         p.error("--objects and --out are required (or --self-test)")
     if not 1 <= args.min_objects <= args.max_objects:
         p.error("need 1 <= --min-objects <= --max-objects")
+    if not 0.0 <= args.pairs <= 1.0:
+        p.error("--pairs is a probability: 0..1")
     return args
 
 
@@ -385,6 +394,42 @@ def hulls_apart(a, b, gap):
     return False
 
 
+def place_twin(rng, cls, first, placed, limit):
+    """A second copy of `first` touching it: same rest, yaw within 8 degrees,
+    slid along a random direction until its footprint is 0.5-3 mm from the
+    first's (bisection on the separating-axis test; footprints are convex, so
+    the offsets at which they overlap form one interval). None when no
+    direction leaves it on the table and clear of the other objects."""
+    for _ in range(60):
+        gap = rng.uniform(0.0005, 0.003)
+        rot = Matrix.Rotation(first["yaw"] + rng.uniform(-0.14, 0.14), 3, "Z") @ first["rest"]["rot"]
+        pts = [rot @ Vector(p) for p in cls["obj"]["v"]]
+        cr = max(math.hypot(p.x, p.y) for p in pts)
+        a = rng.uniform(0, math.tau)
+        ux, uy = math.cos(a), math.sin(a)
+
+        def hull_at(t):
+            return convex_hull([(p.x + first["x"] + t * ux, p.y + first["y"] + t * uy) for p in pts])
+
+        lo, hi = 0.0, first["r"] + cr + gap + 0.01
+        for _ in range(40):
+            mid = 0.5 * (lo + hi)
+            if hulls_apart(first["hull"], hull_at(mid), gap):
+                hi = mid
+            else:
+                lo = mid
+        x, y = first["x"] + hi * ux, first["y"] + hi * uy
+        hull = hull_at(hi)
+        if any(abs(hx) > limit[0] or abs(hy) > limit[1] for hx, hy in hull):
+            continue
+        if any(not hulls_apart(hull, o["hull"], 0.003) for o in placed if o is not first):
+            continue
+        z = TABLE_TOP_Z + REST_GAP - min(p.z for p in pts)
+        return {"class": first["class"], "rot": rot, "x": x, "y": y, "z": z, "r": cr, "hull": hull,
+                "upright": first["upright"], "yaw": first["yaw"], "rest": first["rest"]}
+    return None
+
+
 # ---------------------------------------------------------------- scene
 
 
@@ -597,6 +642,9 @@ def build_scene(rng, classes, meshes, scene_index, args, log):
     # Objects: distinct classes, mostly upright, rejection-sampled footprints.
     n = min(len(classes), rng.randint(args.min_objects, args.max_objects))
     chosen = rng.sample(range(len(classes)), n)
+    # Drawn only with --pairs, so that splits rendered without it stay as they were.
+    twin_of = rng.choice(chosen) if args.pairs > 0 and rng.random() < args.pairs else None
+    paired = None
     radius = rng.uniform(0.06, 0.15)
     centre = (rng.uniform(-0.1, 0.1), rng.uniform(-0.08, 0.08))
     limit = (table_size[0] / 2 - 0.03, table_size[1] / 2 - 0.03)
@@ -634,11 +682,18 @@ def build_scene(rng, classes, meshes, scene_index, args, log):
                 continue
             z = TABLE_TOP_Z + REST_GAP - min(p.z for p in pts)
             placed.append({"class": ci, "rot": rot, "x": x, "y": y, "z": z, "r": cr, "hull": hull,
-                           "upright": rest["upright"]})
+                           "upright": rest["upright"], "yaw": yaw, "rest": rest})
             ok = True
             break
         if not ok:
             log(f"scene {scene_index}: no room for {cls['name']}, left out")
+        elif ci == twin_of:
+            twin = place_twin(rng, cls, placed[-1], placed, limit)
+            if twin is None:
+                log(f"scene {scene_index}: no room for a second {cls['name']}, left out")
+            else:
+                placed.append(twin)
+                paired = cls["name"]
     instances = []
     for k, p in enumerate(sorted(placed, key=lambda p: p["class"])):
         cls = classes[p["class"]]
@@ -655,7 +710,8 @@ def build_scene(rng, classes, meshes, scene_index, args, log):
     total = sum(s for s, _ in light_colors)
     mean_light = tuple(sum(s * c[i] for s, c in light_colors) / total for i in range(3))
     desc = {"table": table_kind, "room": room, "lights": [l.data.type for l in lights], "objects": len(instances),
-            "lying": sum(not i["upright"] for i in instances)}
+            "lying": sum(not i["upright"] for i in instances),
+            "pair": paired}
     return made, instances, mean_light, desc
 
 
@@ -943,7 +999,7 @@ def prepare_dataset(args, classes):
         "generator": "tools/blender/render_bop_split.py (Blender Cycles, CPU)",
         "blender": bpy.app.version_string, "seed": args.seed, "scenes": args.scenes, "first_scene": args.first_scene,
         "views_per_scene": args.views, "objects_per_frame": [args.min_objects, args.max_objects],
-        "samples": args.samples, "noise_threshold": args.noise_threshold,
+        "samples": args.samples, "noise_threshold": args.noise_threshold, "pairs": args.pairs,
     }
     write_json(manifest_path, manifest)
     write_json(os.path.join(root, "models", "models_info.json"), models_info_bop(classes))
