@@ -3,6 +3,7 @@
 //! Thin over the libraries: every subcommand parses flags and calls into
 //! scene, estimator, train or client. No logic of its own beyond wiring.
 
+mod adapt;
 mod bridge;
 mod camera;
 mod camera_model;
@@ -40,6 +41,8 @@ enum Command {
     Stats(stats::Args),
     /// Keep a camera's frames as a BOP split without ground truth (to adapt the segmenter to it).
     Record(record::Args),
+    /// Adapt a weight file's segmenter to a camera from frames `record` kept (labels, fine-tune, report).
+    Adapt(Box<adapt::Args>),
     /// Render a synthetic BOP dataset of tabletop scenes.
     Render(render::Args),
     /// Inspect or export object sets.
@@ -68,6 +71,7 @@ fn main() {
         Command::Watch(a) => watch::run(a),
         Command::Stats(a) => stats::run(a),
         Command::Record(a) => record::run(a),
+        Command::Adapt(a) => adapt::run(*a),
         Command::Render(a) => render::run(a),
         Command::Objects(a) => objects::run(a),
         Command::Train(a) => train::run(*a),

@@ -1,7 +1,7 @@
 //! `fusepose record`: keeps every n-th frame a camera publishes (subscribing
 //! to its frame service beside the daemon) as a BOP split without ground
-//! truth, to pseudo-label and adapt the segmenter to that camera with
-//! (`fusepose eval --pseudo-labels`, `fusepose train --stage seg
+//! truth, to adapt the segmenter to that camera with (`fusepose adapt`, or
+//! by hand `fusepose eval --pseudo-labels` and `fusepose train --stage seg
 //! --adapt-labels`). Colour is written as RGB; u16 depth keeps its units,
 //! metres (f32) become BOP's 0.1 mm units; labels the producer sent are not
 //! written.
@@ -130,6 +130,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         kept += 1;
     }
     println!("recorded {kept} frames of camera {} into {}", args.name, args.out.join(&args.split).display());
+    let split = if args.split == "test" { String::new() } else { format!(" --split {}", args.split) };
+    println!(
+        "adapt the segmenter to them: fusepose adapt --frames {}{split} --out models/{}.safetensors",
+        args.out.display(),
+        args.name
+    );
     Ok(())
 }
 

@@ -11,7 +11,8 @@ use std::time::Duration;
 
 use fusepose_tests::*;
 
-const SUBCOMMANDS: [&str; 9] = ["camera", "watch", "stats", "render", "objects", "train", "eval", "demo", "bridge"];
+const SUBCOMMANDS: [&str; 11] =
+    ["camera", "watch", "stats", "render", "objects", "train", "eval", "demo", "bridge", "record", "adapt"];
 const BENCH_SUBCOMMANDS: [&str; 5] = ["transport", "estimator", "e2e", "tracking", "ros2"];
 
 fn fusepose() -> PathBuf {
@@ -52,22 +53,22 @@ fn every_subcommand_has_help_with_the_shared_flag_names() -> anyhow::Result<()> 
         assert!(helps[sub].contains("--dataset") && helps[sub].contains("--split"), "{sub}:\n{}", helps[sub]);
     }
     // Metres per mesh unit: --scale everywhere (--mesh-scale only as a hidden alias).
-    for sub in ["render", "train", "eval", "objects list"] {
+    for sub in ["render", "train", "eval", "objects list", "record", "adapt"] {
         assert!(helps[sub].contains("--scale"), "{sub} has no --scale:\n{}", helps[sub]);
         assert!(!helps[sub].contains("--mesh-scale"), "{sub} still shows --mesh-scale:\n{}", helps[sub]);
     }
     // Commands that run the network default to the shipped weights.
-    for sub in ["eval", "demo"] {
+    for sub in ["eval", "demo", "adapt"] {
         assert!(helps[sub].contains("--weights"), "{sub}");
         assert!(helps[sub].contains("models/builtin.safetensors"), "{sub}: no default weights:\n{}", helps[sub]);
     }
-    for sub in ["render", "train", "eval", "camera", "demo"] {
+    for sub in ["render", "train", "eval", "camera", "demo", "adapt"] {
         assert!(helps[sub].contains("--seed"), "{sub} has no --seed");
     }
     for sub in ["camera", "demo"] {
         assert!(helps[sub].contains("--fps"), "{sub} has no --fps");
     }
-    for sub in ["render", "train", "eval"] {
+    for sub in ["render", "train", "eval", "record", "adapt"] {
         assert!(helps[sub].contains("--objects <OBJECTS>"), "{sub}: --objects names the object set:\n{}", helps[sub]);
     }
     // The ROS 2 bridges: the daemon's camera by --name, the DDS domain by --domain-id, QoS flags alike.
