@@ -5,8 +5,8 @@
 //! The steps are the documented commands, each run as a child `fusepose`
 //! process with its output in the work folder: pseudo-labels from the file's
 //! own depth-confirmed poses (`eval --pseudo-labels`), the segmenter
-//! fine-tuned on them beside rendered scenes drawn as its file records
-//! (`train --stage seg --adapt-labels`), embedded into a copy of the file and
+//! fine-tuned on them beside rendered scenes drawn as its file records, seen
+//! through the recorded camera's intrinsics (`train --stage seg --adapt-labels`), embedded into a copy of the file and
 //! its certainty recorded (`train --stage calibrate`). The first share of each
 //! recorded split's frames is held out of the training and both files are run
 //! on it: no ground truth exists there, so the report counts what the depth
@@ -205,7 +205,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seg.metadata.get(KEY_HYPER).and_then(|h| serde_json::from_str(h).ok()).with_context(|| {
             format!("{} does not record how its segmenter was trained ({KEY_HYPER})", args.weights.display())
         })?;
-    let recipe = recipe_flags(&hyper)?;
+    let mut recipe = recipe_flags(&hyper)?;
     let work = args.work.clone().unwrap_or_else(|| {
         let stem = args.out.file_stem().map_or_else(|| "adapted".into(), |s| s.to_string_lossy().into_owned());
         args.out.with_file_name(format!("{stem}-adapt"))
@@ -216,9 +216,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // 1. Pseudo-labels, and the training share of each split's frames.
     let mut label_dirs = Vec::new();
     let mut checks = Vec::new();
+    let mut camera = None;
     for (i, dir) in args.frames.iter().enumerate() {
         let data = BopDataset::open_split(dir, &args.split)
             .with_context(|| format!("--frames {}: not a recorded split (fusepose record --out DIR)", dir.display()))?;
+        if data.is_empty() {
+            bail!("--frames {}: the split holds no frames", dir.display());
+        }
+        if camera.is_none() {
+            let k = data.load(0).with_context(|| format!("reading the first frame of {}", dir.display()))?.intrinsics;
+            camera = Some(crate::camera_model::format(&k));
+        }
         let name = format!("{i}-{}", dir.file_name().map_or_else(|| "frames".into(), |n| n.to_string_lossy()));
         let labels = work.join("labels").join(&name);
         let full = labels.join("pseudo_labels.all.json");
@@ -262,6 +270,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             checks.push((name, dir.clone(), held));
         }
     }
+
+    // The rendered half is seen through the recorded camera (the first split's first frame).
+    recipe.extend(["--intrinsics".into(), camera.expect("at least one split")]);
 
     // 2. The fine-tune (its progress shown), 3. embedded into a copy and calibrated.
     let seg_out = work.join("seg.safetensors");

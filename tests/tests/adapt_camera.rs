@@ -62,6 +62,10 @@ fn one_command_adapts_the_segmenter_to_recorded_frames_and_reports_held_out_ones
     assert!(run.status.success(), "adapt failed:\n{stdout}\n{}", String::from_utf8_lossy(&run.stderr));
     assert!(stdout.contains("4 frames labelled, 3 for training"), "{stdout}");
     assert!(stdout.contains("the first 1 held out"), "{stdout}");
+    // The rendered half follows the shipped segmenter's record, seen through the recorded camera.
+    assert!(stdout.contains("--randomize off --depth-sensor basic"), "{stdout}");
+    let k = fusepose_scene::Intrinsics::YCB_VIDEO;
+    assert!(stdout.contains(&format!("--intrinsics {},{},{},{},640,480", k.fx, k.fy, k.cx, k.cy)), "{stdout}");
 
     // The training manifest leaves the held-out frame out; the full one keeps it.
     let data = BopDataset::open_split(&frames, "test")?;
