@@ -201,11 +201,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let seg = SegFile::read(&args.weights)
         .with_context(|| format!("{} has no segmenter to adapt (read as a weight file)", args.weights.display()))?;
-    let hyper: serde_json::Value =
-        seg.metadata.get(KEY_HYPER).and_then(|h| serde_json::from_str(h).ok()).with_context(|| {
+    let hyper: Option<serde_json::Value> = seg.metadata.get(KEY_HYPER).and_then(|h| serde_json::from_str(h).ok());
+    let mut recipe = hyper
+        .with_context(|| {
             format!("{} does not record how its segmenter was trained ({KEY_HYPER})", args.weights.display())
-        })?;
-    let mut recipe = recipe_flags(&hyper)?;
+        })
+        .and_then(|h| recipe_flags(&h))
+        .context(
+            "no scene recipe to fine-tune with: adapt it by hand with the flags it was trained with \
+             (docs/TRAINING.md, \"Adapting the segmenter to your camera\", the steps by hand)",
+        )?;
     let work = args.work.clone().unwrap_or_else(|| {
         let stem = args.out.file_stem().map_or_else(|| "adapted".into(), |s| s.to_string_lossy().into_owned());
         args.out.with_file_name(format!("{stem}-adapt"))
