@@ -3,7 +3,8 @@
 //! to with a few training steps; the command labels it, holds its first
 //! frames out of the training, writes a copy of the shipped file with the
 //! fine-tuned segmenter and its certainty, and reports both files on the
-//! held-out frames. Bad arguments are refused before any work.
+//! held-out frames. Bad arguments and a file without a training record are
+//! refused before any work.
 
 use std::path::Path;
 use std::process::Command;
@@ -97,7 +98,8 @@ fn one_command_adapts_the_segmenter_to_recorded_frames_and_reports_held_out_ones
 }
 
 #[test]
-fn adapt_refuses_to_overwrite_the_file_it_adapts_and_a_folder_that_is_no_recording() -> anyhow::Result<()> {
+fn adapt_refuses_to_overwrite_its_file_a_folder_that_is_no_recording_and_a_file_without_a_recipe() -> anyhow::Result<()>
+{
     let dir = tempfile::tempdir()?;
     let run = fusepose()?
         .args(["adapt", "--frames"])
@@ -117,5 +119,21 @@ fn adapt_refuses_to_overwrite_the_file_it_adapts_and_a_folder_that_is_no_recordi
     let stderr = String::from_utf8_lossy(&run.stderr);
     assert!(!run.status.success());
     assert!(stderr.contains("not a recorded split") && stderr.contains("fusepose record"), "{stderr}");
+
+    // A file that does not say how its segmenter was trained has no recipe for the rendered half.
+    let shipped = std::fs::read(workspace_root()?.join("models/builtin.safetensors"))?;
+    let bare = dir.path().join("bare.safetensors");
+    std::fs::write(&bare, fusepose_estimator::seg::file::with_metadata(&shipped, "fusepose.seg.hyper", "{}".into())?)?;
+    let run = fusepose()?
+        .args(["adapt", "--frames"])
+        .arg(dir.path())
+        .arg("--weights")
+        .arg(&bare)
+        .arg("--out")
+        .arg(dir.path().join("cam.safetensors"))
+        .output()?;
+    let stderr = String::from_utf8_lossy(&run.stderr);
+    assert!(!run.status.success());
+    assert!(stderr.contains("no scene recipe") && stderr.contains("by hand"), "{stderr}");
     Ok(())
 }
