@@ -186,6 +186,11 @@ pub struct Args {
     /// train --stage seg --adapt-labels DIR`.
     #[arg(long)]
     pub pseudo_labels: Option<PathBuf>,
+    /// With --pseudo-labels: label as background the table pixels the segmenter gave a class that no pose
+    /// explains (ghosts to unlearn). Off by default: adapted with it, the segmenter lost objects on held-out
+    /// frames of its camera (docs/BENCHMARKS.md, session 49).
+    #[arg(long)]
+    pub pseudo_table_patches: bool,
     /// Object set: `builtin` or a mesh folder (default: the one the dataset names, else builtin).
     #[arg(long)]
     pub objects: Option<String>,
@@ -574,7 +579,9 @@ fn run_cast(args: Args) -> anyhow::Result<serde_json::Map<String, serde_json::Va
     let mut auto_exposure = args.auto_exposure.0.map(fusepose_estimator::exposure::AutoExposure::new);
     let mut white_balance = args.white_balance.0.map(fusepose_estimator::white_balance::WhiteBalance::new);
     let mut pseudo = match &args.pseudo_labels {
-        Some(dir) => Some(pseudo::PseudoLabeller::create(dir, &data.split_dir()?, &objects)?),
+        Some(dir) => {
+            Some(pseudo::PseudoLabeller::create(dir, &data.split_dir()?, &objects, args.pseudo_table_patches)?)
+        }
         None => None,
     };
     for index in 0..frames {
