@@ -62,7 +62,7 @@ pub struct Args {
     #[arg(long, default_value_t = 120)]
     pub val_frames: usize,
     /// Folder for labels, logs and the segmenter alone (default: next to --out, `<stem>-adapt`).
-    /// Labels already there are reused, so the command can be run again after a stop.
+    /// Labels the same --weights made there are reused, so the command can be run again after a stop.
     #[arg(long)]
     pub work: Option<PathBuf>,
 }
@@ -152,6 +152,15 @@ fn os(p: &Path) -> String {
     p.display().to_string()
 }
 
+/// `fusepose eval` of the network with the segmenter's masks and verification, on one recorded split.
+fn eval_argv(dir: &Path, split: &str, weights: &Path, objects: &[String]) -> Vec<String> {
+    let mut a: Vec<String> =
+        ["eval", "--dataset", &os(dir), "--split", split, "--estimator", "net"].map(String::from).into();
+    a.extend(["--weights".into(), os(weights), "--masks".into(), "net".into(), "--verify".into(), "drop".into()]);
+    a.extend(objects.iter().cloned());
+    a
+}
+
 /// Runs `fusepose ARGS`, its output appended to `log` (or shown with `show`).
 fn fusepose(args: &[String], log: &Path, show: bool) -> anyhow::Result<()> {
     let exe = std::env::current_exe().context("locating the fusepose executable")?;
@@ -235,18 +244,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let name = format!("{i}-{}", dir.file_name().map_or_else(|| "frames".into(), |n| n.to_string_lossy()));
         let labels = work.join("labels").join(&name);
         let full = labels.join("pseudo_labels.all.json");
-        if !full.is_file() {
+        // Labels are reused only when the same file (path and size) made them.
+        let stamp_path = labels.join("labelled_by.txt");
+        let stamp = format!("{} {}\n", os(&args.weights), std::fs::metadata(&args.weights)?.len());
+        if !full.is_file() || std::fs::read_to_string(&stamp_path).ok().as_deref() != Some(stamp.as_str()) {
             if labels.exists() {
                 std::fs::remove_dir_all(&labels).with_context(|| format!("clearing {}", labels.display()))?;
             }
             println!("labelling {} ({} frames) with {}", dir.display(), data.len(), args.weights.display());
-            let mut a: Vec<String> =
-                ["eval", "--dataset", &os(dir), "--split", &args.split, "--estimator", "net"].map(String::from).into();
-            a.extend(["--weights".into(), os(&args.weights), "--masks".into(), "net".into(), "--verify".into()]);
-            a.extend(["drop".into(), "--pseudo-labels".into(), os(&labels)]);
-            a.extend(objects.iter().cloned());
+            let mut a = eval_argv(dir, &args.split, &args.weights, &objects);
+            a.extend(["--pseudo-labels".into(), os(&labels)]);
             fusepose(&a, &work.join(format!("label-{name}.log")), false)?;
             std::fs::rename(labels.join(PSEUDO_MANIFEST_FILE), &full)?;
+            std::fs::write(&stamp_path, &stamp)?;
+        } else {
+            println!("reusing the labels of {} in {}", dir.display(), labels.display());
         }
         let text = std::fs::read_to_string(&full).with_context(|| format!("reading {}", full.display()))?;
         let mut manifest: fusepose_scene::bop::PseudoLabelManifest =
@@ -338,11 +350,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let mut verdicts = Vec::new();
         for (tag, weights) in [("before", &args.weights), ("after", &args.out)] {
             let json = work.join(format!("check-{name}-{tag}.json"));
-            let mut a: Vec<String> =
-                ["eval", "--dataset", &os(dir), "--split", &args.split, "--estimator", "net"].map(String::from).into();
-            a.extend(["--weights".into(), os(weights), "--masks".into(), "net".into(), "--verify".into()]);
-            a.extend(["drop".into(), "--limit".into(), held.to_string(), "--json".into(), os(&json)]);
-            a.extend(objects.iter().cloned());
+            let mut a = eval_argv(dir, &args.split, weights, &objects);
+            a.extend(["--limit".into(), held.to_string(), "--json".into(), os(&json)]);
             fusepose(&a, &work.join(format!("check-{name}-{tag}.log")), false)?;
             let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&json)?)
                 .with_context(|| format!("reading {}", json.display()))?;

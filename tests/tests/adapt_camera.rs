@@ -3,7 +3,8 @@
 //! to with a few training steps; the command labels it, holds its first
 //! frames out of the training, writes a copy of the shipped file with the
 //! fine-tuned segmenter and its certainty, and reports both files on the
-//! held-out frames. Bad arguments and a file without a training record are
+//! held-out frames; run again, it reuses the labels. Bad arguments and a file
+//! without a training record are
 //! refused before any work.
 
 use std::path::Path;
@@ -94,6 +95,20 @@ fn one_command_adapts_the_segmenter_to_recorded_frames_and_reports_held_out_ones
     let row = table.lines().find(|l| l.trim_start().starts_with("0-cell")).unwrap_or_default();
     assert_eq!(row.matches("->").count(), 2, "{stdout}");
     assert!(row.split_whitespace().nth(1) == Some("1"), "{row}");
+
+    // Run again (no hold-out this time): the labels the same file made are reused, not made again.
+    let again = fusepose()?
+        .args(["adapt", "--frames"])
+        .arg(&frames)
+        .args(["--steps", "1", "--val-frames", "1", "--hold-out", "0", "--out"])
+        .arg(dir.path().join("cam0b.safetensors"))
+        .arg("--work")
+        .arg(&work)
+        .output()?;
+    let stdout = String::from_utf8_lossy(&again.stdout);
+    assert!(again.status.success(), "adapt again failed:\n{stdout}\n{}", String::from_utf8_lossy(&again.stderr));
+    assert!(stdout.contains("reusing the labels") && !stdout.contains("labelling"), "{stdout}");
+    assert!(stdout.contains("4 frames labelled, 4 for training"), "{stdout}");
     Ok(())
 }
 
