@@ -4,8 +4,7 @@
 //! frames out of the training, writes a copy of the shipped file with the
 //! fine-tuned segmenter and its certainty, and reports both files on the
 //! held-out frames; run again, it reuses the labels. Bad arguments and a file
-//! without a training record are
-//! refused before any work.
+//! without a training record are refused before any work.
 
 use std::path::Path;
 use std::process::Command;
