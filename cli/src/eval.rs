@@ -187,8 +187,8 @@ pub struct Args {
     #[arg(long)]
     pub pseudo_labels: Option<PathBuf>,
     /// With --pseudo-labels: label as background the table pixels the segmenter gave a class that no pose
-    /// explains (ghosts to unlearn). Off by default: adapted with it, the segmenter lost objects on held-out
-    /// frames of its camera (docs/BENCHMARKS.md, session 49).
+    /// explains (ghosts to unlearn). Off by default, as session 48's round 1 labelled; the one command adapted
+    /// alike with and without it (docs/BENCHMARKS.md, session 49).
     #[arg(long)]
     pub pseudo_table_patches: bool,
     /// Object set: `builtin` or a mesh folder (default: the one the dataset names, else builtin).

@@ -11,9 +11,9 @@
 //! to the segmenter's background). Where the segmenter saw an object on the
 //! plane that no pose explains it is unknown unless `table_patches` asks for
 //! background (a patch of table that took a class is a ghost to unlearn, but
-//! the lowest centimetre of an object whose pose failed lies there too: with
-//! it the adapted file lost ADD(S) on held-out frames of its camera,
-//! docs/BENCHMARKS.md session 49). Everywhere else it is unknown and teaches nothing: pixels a pose covers
+//! the lowest centimetre of an object whose pose failed lies there too; files
+//! adapted with and without it scored alike, docs/BENCHMARKS.md session 49).
+//! Everywhere else it is unknown and teaches nothing: pixels a pose covers
 //! but the depth does not confirm (an occluder no pose explains, a slightly
 //! wrong pose), and points off the plane that no pose explains (a copy nobody
 //! posed, walls, other things): a missed object must not be taught as
