@@ -18,7 +18,7 @@ use std::process::{Command, Stdio};
 use anyhow::{Context, bail};
 use fusepose_estimator::seg::SegFile;
 use fusepose_estimator::seg::file::KEY_HYPER;
-use fusepose_scene::bop::{BopDataset, PSEUDO_MANIFEST_FILE, read_pseudo_manifest};
+use fusepose_scene::bop::{BopDataset, PSEUDO_MANIFEST_FILE};
 
 #[derive(clap::Args, Debug)]
 pub struct Args {
@@ -280,8 +280,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             before,
             manifest.frames.len()
         );
-        // The label reader checks the manifest again when training starts.
-        read_pseudo_manifest(&labels)?;
         label_dirs.push(labels);
         if held > 0 {
             checks.push((name, dir.clone(), held));
