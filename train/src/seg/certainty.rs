@@ -9,9 +9,16 @@
 //! (`SegEngine::region_probability`), here over the TRUE region of every
 //! object at least [`MIN_PIXELS`] pixels large in frames rendered from the
 //! segmenter's validation seeds ([`super::validate::SEG_VAL_SEED_BASE`],
-//! never a training, tuning or test seed) with the sampler the model was
-//! trained with. The percentiles of those peaks are stored in the weight
-//! file (`fusepose_estimator::seg::file::Certainty`).
+//! never a training, tuning or test seed) with the sampler the caller gives
+//! (`fusepose train --stage calibrate`: the randomised training sampler by
+//! default, whatever the segmenter trained on). The percentiles of those
+//! peaks are stored in the weight file (`fusepose_estimator::seg::file::Certainty`).
+//!
+//! Randomised frames are the measure because a segmenter is surest on the
+//! frames it trained on: on plain frames the shipped segmenter's 5 % is
+//! 0.984 against 0.765 on randomised ones, and that floor refused true
+//! objects of path-traced frames with their ghosts (−2.35 ADD(S) on
+//! `pt_tune12`; docs/BENCHMARKS.md, session 50).
 
 use fusepose_estimator::seg::SegEngine;
 use fusepose_estimator::seg::file::Certainty;
