@@ -149,6 +149,11 @@ pub struct Args {
     /// less per sample (1..=8).
     #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u8).range(1..=8))]
     pub views_per_frame: u8,
+    /// Further training samples per rendered frame of each object whose box
+    /// touches the image border (0..=4): close views of objects cut by the
+    /// image edge are drawn more often without rendering more.
+    #[arg(long, default_value_t = 0, value_parser = clap::value_parser!(u8).range(0..=4))]
+    pub edge_views: u8,
     /// Train only on objects at least this visible (share of the silhouette, 0..1).
     #[arg(long, default_value_t = 0.1)]
     pub min_visible: f64,
@@ -480,6 +485,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             format!(", {} samples per object per rendered frame", args.views_per_frame)
         } else {
             String::new()
+        } + &if args.edge_views > 0 {
+            format!(", {} more of each object cut by the image edge", args.edge_views)
+        } else {
+            String::new()
         },
         source,
         progress: !args.quiet,
@@ -488,6 +497,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         min_visible: args.min_visible,
         sampler,
         views_per_frame: args.views_per_frame as usize,
+        edge_views: args.edge_views as usize,
     };
     let summary = train(Arc::new(set), &opts)?;
     println!(
@@ -555,6 +565,7 @@ fn bench_data(set: &fusepose_scene::ObjectSet, args: &Args) -> anyhow::Result<()
         augment: true,
         sampler: training_sampler(args),
         views_per_frame: args.views_per_frame as usize,
+        edge_views: args.edge_views as usize,
         ..fusepose_train::data::DataConfig::unaugmented(
             args.points.unwrap_or(cfg.num_points),
             args.crop.unwrap_or(cfg.crop_size),
@@ -644,6 +655,8 @@ mod tests {
     fn one_sample_per_object_and_frame_unless_asked_and_at_most_eight() {
         assert_eq!(args(&[]).views_per_frame, 1);
         assert_eq!(args(&["--views-per-frame", "2"]).views_per_frame, 2);
+        assert_eq!(args(&[]).edge_views, 0);
+        assert_eq!(args(&["--edge-views", "2"]).edge_views, 2);
         for bad in ["0", "9"] {
             assert!(Cmd::try_parse_from(["train", "--views-per-frame", bad]).is_err(), "{bad} is refused");
         }

@@ -76,6 +76,12 @@ pub struct DataConfig {
     /// draws its own point subset and augmentation from the same render, so
     /// the render's cost is shared by `views_per_frame` samples.
     pub views_per_frame: usize,
+    /// Further samples per rendered frame of each object whose box touches
+    /// the image border ([`cut_by_edge`]): close views of objects cut by the
+    /// image edge lose most of what touching pairs lose with true masks
+    /// (docs/BENCHMARKS.md, session 45), so they can be drawn more often
+    /// without rendering more.
+    pub edge_views: usize,
     /// Share (0..=1) of ground-truth-mask frames whose object masks are cut
     /// to a random part ([`cut_masks`]): on images it did not render, the
     /// segmenter finds only part of many objects (docs/BENCHMARKS.md,
@@ -95,6 +101,7 @@ impl DataConfig {
             augment: false,
             sampler: SamplerConfig::default(),
             views_per_frame: 1,
+            edge_views: 0,
             partial_masks: 0.0,
         }
     }
@@ -264,11 +271,17 @@ pub fn frame_samples(
             max_offset: from_segmenter.then(|| set.by_class(o.class_id).map(|m| m.diameter)).flatten(),
         })
         .collect();
-    let mut out = samples_from_frame(&frame, &truths, Some(target.labels()), cfg, seed, ws)?;
+    let labels = Some(target.labels());
+    let mut out = samples_from_frame(&frame, &truths, labels, cfg, seed, ws, Objects::All)?;
     for view in 1..cfg.views_per_frame.max(1) as u64 {
         // Seeds of further views stay clear of the frame seeds (consecutive integers).
         let view_seed = seed ^ view.wrapping_mul(0x9e37_79b9_7f4a_7c15);
-        out.extend(samples_from_frame(&frame, &truths, Some(target.labels()), cfg, view_seed, ws)?);
+        out.extend(samples_from_frame(&frame, &truths, labels, cfg, view_seed, ws, Objects::All)?);
+    }
+    for view in 0..cfg.edge_views as u64 {
+        // A stream of seeds of their own, apart from the views' above.
+        let view_seed = seed ^ (view + 1).wrapping_mul(0xd1b5_4a32_d192_ed03);
+        out.extend(samples_from_frame(&frame, &truths, labels, cfg, view_seed, ws, Objects::CutByEdge)?);
     }
     Ok(out)
 }
@@ -305,7 +318,22 @@ pub fn bop_frame_samples(
                 max_offset: None,
             })
             .collect();
-    samples_from_frame(&frame, &truths, None, cfg, seed, ws)
+    samples_from_frame(&frame, &truths, None, cfg, seed, ws, Objects::All)
+}
+
+/// Which of a frame's objects [`samples_from_frame`] takes.
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Objects {
+    All,
+    /// Those whose box touches the image border ([`cut_by_edge`]).
+    CutByEdge,
+}
+
+/// Whether an instance's box `[u0, v0, u1, v1]` (pixels, inclusive) touches
+/// the border of a `width` × `height` image: the object runs out of the view.
+pub fn cut_by_edge(bbox: [u16; 4], width: usize, height: usize) -> bool {
+    let [u0, v0, u1, v1] = bbox.map(usize::from);
+    u0 == 0 || v0 == 0 || u1 + 1 >= width || v1 + 1 >= height
 }
 
 /// The ground-truth object that covers at least [`MIN_OWN_SHARE`] of
@@ -345,6 +373,7 @@ fn samples_from_frame(
     cfg: &DataConfig,
     seed: u64,
     ws: &mut Workspace,
+    objects: Objects,
 ) -> anyhow::Result<Vec<Sample>> {
     let count = ws.prepare(frame, seed).context("preparing the workspace")?;
     let mut rng = Pcg64::seed_from_u64(seed ^ 0x5eed_da7a);
@@ -352,6 +381,9 @@ fn samples_from_frame(
     let mut out = Vec::with_capacity(count);
     for i in 0..count {
         let inst = ws.instances[i];
+        if objects == Objects::CutByEdge && !cut_by_edge(inst.bbox, frame.width(), frame.height()) {
+            continue;
+        }
         let (cu, cv) =
             ((inst.bbox[0] as f64 + inst.bbox[2] as f64) / 2.0, (inst.bbox[1] as f64 + inst.bbox[3] as f64) / 2.0);
         let dist = |t: &Truth| t.centre.map_or(f64::INFINITY, |(u, v)| (u - cu).powi(2) + (v - cv).powi(2));

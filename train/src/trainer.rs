@@ -91,6 +91,9 @@ pub struct TrainOptions {
     pub sampler: fusepose_scene::sampler::SamplerConfig,
     /// Samples per object per rendered frame ([`DataConfig::views_per_frame`]).
     pub views_per_frame: usize,
+    /// Further samples per rendered frame of each object cut by the image
+    /// edge ([`DataConfig::edge_views`]).
+    pub edge_views: usize,
     /// Where the network trains ([`crate::device`]).
     pub device: crate::device::TrainDevice,
     /// Threads rendering training frames: the samples are the same for any
@@ -228,6 +231,7 @@ pub fn train(set: Arc<ObjectSet>, opts: &TrainOptions) -> anyhow::Result<TrainSu
         augment: true,
         sampler: opts.sampler.clone(),
         views_per_frame: opts.views_per_frame,
+        edge_views: opts.edge_views,
         partial_masks: opts.partial_masks,
         ..DataConfig::unaugmented(cfg.num_points, cfg.crop_size)
     };
