@@ -178,10 +178,12 @@ fn python_producer_consumer_and_stats_query_against_a_real_daemon() -> anyhow::R
             let view = &o["views"][0];
             assert_eq!((u64_of(o, "view_count"), u64_of(view, "camera_id")), (1, camera_id("cam0") as u64), "{o}");
             let Some(rust) = by_sequence.get(&u64_of(view, "frame_sequence")) else { continue };
-            // `instance_id` names the pose within its message; it is no index (a dropped pose leaves a gap).
+            // `instance_id` is the pose's id (stable while the object stays in view), not its index in the message.
             let id = u64_of(view, "instance_id");
             let r = rust.objects().iter().find(|r| r.instance_id as u64 == id);
-            let r = r.unwrap_or_else(|| panic!("cell object {o} names instance {id}, absent from frame {}", rust.frame_sequence));
+            let r = r.unwrap_or_else(|| {
+                panic!("cell object {o} names instance {id}, absent from frame {}", rust.frame_sequence)
+            });
             assert_eq!(u64_of(o, "class_id"), r.class_id as u64, "{o}");
             let t: Vec<f64> = o["translation_m"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
             // The identity extrinsics are still a rotation and an addition in f64: the last bit may move.
