@@ -57,6 +57,9 @@ use fusepose_client::{
 use fusepose_tests::{MemorySample, Proc, TestEnv, memory_sample, query_stats, read_hlog_intervals};
 
 const CAMERA: &str = "cam0";
+/// Seconds a role may take to start (the producer renders its frames first)
+/// and the consumer may wait for its first pose message.
+const STARTUP_LIMIT_S: u64 = 120;
 /// Frames the `render` producer renders before it starts sending (then loops).
 const RENDERED_FRAMES: usize = 24;
 /// Views per rendered scene.
@@ -221,14 +224,21 @@ fn consumer(args: &[String]) -> anyhow::Result<()> {
     std::io::stdout().flush()?;
     let mut latency = hdrhistogram::Histogram::<u64>::new_with_bounds(1_000, 600_000_000_000, 3)?;
     let (mut messages, mut ok, mut objects, mut degraded, mut late) = (0u64, 0u64, 0u64, 0u64, 0u64);
-    let end = Instant::now() + Duration::from_secs_f64(seconds);
+    // The run's clock starts at the first pose message, not at "ready": the
+    // producer starts after this process and may take seconds to render its
+    // frames, and a clock started here would end before the run does.
+    let first_message_by = Instant::now() + Duration::from_secs(STARTUP_LIMIT_S);
+    let mut end: Option<Instant> = None;
     let mut batch = Vec::with_capacity(16);
-    while Instant::now() < end {
+    while Instant::now() < end.unwrap_or(first_message_by) {
         if !consumer.wait_ready(Duration::from_millis(50))? {
             continue;
         }
         batch.clear();
         consumer.drain(&mut batch)?;
+        if end.is_none() && !batch.is_empty() {
+            end = Some(Instant::now() + Duration::from_secs_f64(seconds));
+        }
         let now = monotonic_ns();
         for msg in &batch {
             messages += 1;
@@ -258,7 +268,7 @@ fn spawn_role(env: &TestEnv, role_args: &[String]) -> anyhow::Result<Proc> {
     cmd.args(role_args);
     let name = if role_args[0] == "producer" { "fp-soak producer" } else { "fp-soak consumer" };
     let p = Proc::spawn_with_stderr(name, cmd, Stdio::inherit())?;
-    p.wait_for_line("ready", Duration::from_secs(120))?;
+    p.wait_for_line("ready", Duration::from_secs(STARTUP_LIMIT_S))?;
     Ok(p)
 }
 
@@ -380,7 +390,7 @@ fn run(args: &[String]) -> anyhow::Result<()> {
         Ok(s) => crashed.push(format!("fuseposed exited with {s} on SIGTERM")),
         Err(e) => crashed.push(format!("fuseposed: {e}")),
     }
-    let consumed = consumer.wait_for_line("consumed ", Duration::from_secs(10)).unwrap_or_else(|e| {
+    let consumed = consumer.wait_for_line("consumed ", Duration::from_secs(30)).unwrap_or_else(|e| {
         crashed.push(format!("consumer: {e}"));
         String::new()
     });
